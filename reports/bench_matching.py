@@ -1,0 +1,275 @@
+"""Benchmark of the sub-pixel matcher against scikit-image and OpenCV.
+
+Windows with known sub-pixel shifts are generated analytically: each pair of
+patches samples a band-limited random texture (a sum of sinusoids below the
+Nyquist frequency, with a ``1/f`` amplitude spectrum and a Gaussian MTF) at
+exactly shifted coordinates, so the reference shift carries no interpolation
+error. Two cases:
+
+``same``
+    Band B is band A shifted, each with its own white noise.
+``cross``
+    Bands A and B are different linear mixes of three independent texture
+    components (spectral bands correlated but not identical), shifted, with
+    noise.
+
+Every method sees the same windows. Ours (``ncc`` and ``phase`` of
+:func:`restore.matching.match_points`) read band B around the prediction
+(search area and interpolation support), as in the processing line;
+``skimage.registration.phase_cross_correlation(upsample_factor=100)`` and
+``cv2.phaseCorrelate`` get the A window and the B window of the same size at
+the predicted position (they have no search area).
+
+Run ``python -m reports.bench_matching`` to print the table.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from restore.matching import match_points, support_margin
+
+__all__ = ["synthetic_pairs", "bench_matching", "format_table", "METHODS"]
+
+METHODS = ("ours-ncc", "ours-phase", "skimage", "opencv")
+CASES = ("same", "cross")
+_PAD = 3  # extra margin of each synthetic patch (px)
+
+
+def _texture_terms(rng, n, n_terms, mtf_nyquist, corner):
+    """Random frequencies (cycles/px), phases and amplitudes, shape (n, n_terms)."""
+    f = rng.uniform(-0.5, 0.5, size=(n, n_terms, 2))
+    fr = np.hypot(f[..., 0], f[..., 1])
+    mtf = mtf_nyquist ** ((fr / 0.5) ** 2)
+    amp = mtf / np.hypot(fr, corner)
+    phase = rng.uniform(0.0, 2.0 * np.pi, size=(n, n_terms))
+    return f, phase, amp
+
+
+def _evaluate(f, phase, amp, lines, cols):
+    """Sum of sinusoids on the grid ``lines x cols`` (per pair): (n, L, C).
+
+    ``cos(2 pi (u l + v c) + p) = cos(2 pi u l + p) cos(2 pi v c) - sin(2 pi u l + p) sin(2 pi v c)``,
+    evaluated as a batched matrix product.
+    """
+    arg_l = 2 * np.pi * f[:, None, :, 0] * lines[:, :, None] + phase[:, None, :]  # (n, L, K)
+    arg_c = 2 * np.pi * f[:, None, :, 1] * cols[:, :, None]  # (n, C, K)
+    left = np.concatenate([np.cos(arg_l) * amp[:, None, :], -np.sin(arg_l) * amp[:, None, :]], axis=2)
+    right = np.concatenate([np.cos(arg_c), np.sin(arg_c)], axis=2)
+    return np.matmul(left, right.transpose(0, 2, 1))
+
+
+def synthetic_pairs(*, seed=0, n=2000, window=(3, 31), search=(2, 2), max_shift=1.5, case="same",
+                    noise=0.02, n_terms=64, mtf_nyquist=0.3, corner=0.02, band_correlation=0.85):
+    """Pairs of analytic band-limited patches with known sub-pixel shifts.
+
+    Parameters
+    ----------
+    seed : int, keyword-only
+        Seed of every random draw.
+    n : int, keyword-only
+        Number of pairs.
+    window, search : (int, int), keyword-only
+        Matching window and search half-range (px) the patches must support.
+    max_shift : float, keyword-only
+        Shifts are uniform in ``[-max_shift, max_shift]`` on each axis (px).
+    case : {"same", "cross"}, keyword-only
+        Identical bands, or two different mixes of three texture components.
+    noise : float, keyword-only
+        White-noise standard deviation, relative to the texture's.
+    n_terms : int, keyword-only
+        Sinusoids per texture component.
+    mtf_nyquist : float, keyword-only
+        MTF at the Nyquist frequency (Gaussian MTF).
+    corner : float, keyword-only
+        Corner frequency of the ``1/f`` amplitude spectrum (cycles/px).
+    band_correlation : float, keyword-only
+        Cross-band case: correlation of the two mixes (0..1).
+
+    Returns
+    -------
+    dict
+        ``image_a``, ``image_b``: patches stacked along the lines (float
+        arrays); ``lines``, ``cols``: point centres (px); ``shift_lines``,
+        ``shift_cols``: true shifts, so that the point is at
+        ``(lines + shift_lines, cols + shift_cols)`` in B (px);
+        ``patch_shape``.
+    """
+    if case not in CASES:
+        raise ValueError(f"case: expected one of {CASES}, got {case!r}")
+    if int(n) != n or n < 1:
+        raise ValueError(f"n: must be an integer >= 1, got {n}")
+    if not 0 <= max_shift <= min(search):
+        raise ValueError(f"max_shift: must lie in [0, min(search)={min(search)}], got {max_shift}")
+    if noise < 0:
+        raise ValueError(f"noise: must be >= 0, got {noise}")
+    if not 0 < band_correlation <= 1:
+        raise ValueError(f"band_correlation: must lie in (0, 1], got {band_correlation}")
+    rng = np.random.default_rng(seed)
+    ml, mc = support_margin(window=window, search=search)
+    ml, mc = ml + _PAD, mc + _PAD
+    pl, pc = 2 * ml + 1, 2 * mc + 1
+    shift = rng.uniform(-max_shift, max_shift, size=(n, 2))
+    grid_l = np.arange(pl, dtype=float) - ml
+    grid_c = np.arange(pc, dtype=float) - mc
+    n_comp = 1 if case == "same" else 3
+    if case == "same":
+        mix_a = mix_b = np.array([1.0])
+    else:
+        # unit vectors at angle acos(band_correlation), plus different gains
+        t = np.arccos(band_correlation)
+        mix_a = np.array([np.cos(0.3 * t), np.sin(0.3 * t), 0.0])
+        mix_b = 1.3 * np.array([np.cos(-0.7 * t), 0.0, np.sin(-0.7 * t)])
+    img_a = np.zeros((n, pl, pc))
+    img_b = np.zeros((n, pl, pc))
+    for j in range(n_comp):  # a handful of texture components
+        f, ph, amp = _texture_terms(rng, n, n_terms, mtf_nyquist, corner)
+        amp = amp / np.sqrt(0.5 * np.sum(amp**2, axis=1, keepdims=True))  # unit std
+        ones = np.ones((n, 1))
+        comp_a = _evaluate(f, ph, amp, ones * grid_l, ones * grid_c)
+        comp_b = _evaluate(f, ph, amp, grid_l - shift[:, :1], grid_c - shift[:, 1:])
+        img_a += mix_a[j] * comp_a
+        img_b += mix_b[j] * comp_b
+    img_a += noise * np.linalg.norm(mix_a) * rng.standard_normal(img_a.shape) + 10.0
+    img_b += noise * np.linalg.norm(mix_b) * rng.standard_normal(img_b.shape) + 7.0
+    lines = ml + pl * np.arange(n, dtype=float)
+    cols = np.full(n, float(mc))
+    return {
+        "image_a": img_a.reshape(n * pl, pc), "image_b": img_b.reshape(n * pl, pc),
+        "lines": lines, "cols": cols, "shift_lines": shift[:, 0], "shift_cols": shift[:, 1],
+        "patch_shape": (pl, pc),
+    }
+
+
+def _windows(image, lines, cols, window):
+    h, w = window
+    r = lines.astype(int)[:, None] + np.arange(h) - h // 2
+    c = cols.astype(int)[:, None] + np.arange(w) - w // 2
+    return image[r[:, :, None], c[:, None, :]]
+
+
+def _run(method, data, window, search):
+    """Estimated shifts (n, 2), valid mask and seconds spent."""
+    la, ca = data["lines"], data["cols"]
+    if method.startswith("ours"):
+        t0 = time.perf_counter()
+        res = match_points(data["image_a"], data["image_b"], la, ca, la, ca, window=window, search=search,
+                           method=method.split("-")[1])
+        dt = time.perf_counter() - t0
+        return np.stack([res.line_b - la, res.col_b - ca], axis=1), res.valid, dt
+    wa = _windows(data["image_a"], la, ca, window)
+    wb = _windows(data["image_b"], la, ca, window)
+    est = np.empty((la.size, 2))
+    if method == "skimage":
+        from skimage.registration import phase_cross_correlation
+
+        t0 = time.perf_counter()
+        for i in range(la.size):
+            s = phase_cross_correlation(wa[i], wb[i], upsample_factor=100)[0]
+            est[i] = -s  # skimage returns the shift that registers B onto A
+        dt = time.perf_counter() - t0
+    elif method == "opencv":
+        import cv2
+
+        t0 = time.perf_counter()
+        for i in range(la.size):
+            (x, y), _ = cv2.phaseCorrelate(wa[i], wb[i])
+            est[i] = (y, x)
+        dt = time.perf_counter() - t0
+    else:
+        raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+    return est, np.ones(la.size, dtype=bool), dt
+
+
+def _stats(err, valid, shift, n_bins=10):
+    e = err[valid]
+    frac = (shift[valid] + 0.5) % 1.0
+    bins = np.minimum((frac * n_bins).astype(int), n_bins - 1)
+    means = [np.mean(e[bins == b]) for b in range(n_bins) if np.any(bins == b)]
+    return {
+        "bias": float(np.mean(e)), "std": float(np.std(e)),
+        "rmse": float(np.sqrt(np.mean(e**2))),
+        # pixel-locking: worst mean error over fractional-shift bins
+        "locking": float(np.max(np.abs(means))) if means else float("nan"),
+    }
+
+
+def bench_matching(*, seed=0, n=2000, window=(3, 31), search=(2, 2), max_shift=1.5, noise=0.02,
+                   methods=METHODS, cases=CASES, skimage_n=300):
+    """Accuracy and speed of the matchers on analytic shifted windows.
+
+    Parameters
+    ----------
+    seed : int, keyword-only
+        Seed of the synthetic data.
+    n : int, keyword-only
+        Pairs per case.
+    window : (int, int), keyword-only
+        Matching window (lines, columns), odd.
+    search : (int, int), keyword-only
+        Search half-range of our matcher (px).
+    max_shift : float, keyword-only
+        True shifts uniform in ``[-max_shift, max_shift]`` px per axis.
+    noise : float, keyword-only
+        Noise standard deviation relative to the texture's.
+    methods : sequence of str, keyword-only
+        Subset of :data:`METHODS`.
+    cases : sequence of str, keyword-only
+        Subset of ``("same", "cross")``.
+    skimage_n : int, keyword-only
+        scikit-image is slow (~ms per call): at most this many pairs are given
+        to it (the first ones, same windows as the others).
+
+    Returns
+    -------
+    dict
+        ``{"config": {...}, "results": {case: {method: {...}}}}``; each method
+        entry holds ``n`` (pairs), ``valid`` (fraction), ``us_per_match``
+        (µs), and per axis (``line``, ``col``) ``bias``, ``std``, ``rmse``
+        and ``locking`` (px; worst mean error over 10 bins of the fractional
+        shift, i.e. the pixel-locking amplitude). Errors are over valid
+        matches only.
+    """
+    for m in methods:
+        if m not in METHODS:
+            raise ValueError(f"methods: unknown method {m!r}, expected a subset of {METHODS}")
+    out = {"config": {"seed": seed, "n": n, "window": tuple(window), "search": tuple(search),
+                      "max_shift": max_shift, "noise": noise}, "results": {}}
+    for case in cases:
+        data = synthetic_pairs(seed=seed, n=n, window=window, search=search, max_shift=max_shift,
+                               case=case, noise=noise)
+        truth = np.stack([data["shift_lines"], data["shift_cols"]], axis=1)
+        res = {}
+        for m in methods:
+            sub = data
+            if m == "skimage" and n > skimage_n:
+                sub = dict(data, lines=data["lines"][:skimage_n], cols=data["cols"][:skimage_n])
+            k = sub["lines"].size
+            est, valid, dt = _run(m, sub, tuple(window), tuple(search))
+            err = est - truth[:k]
+            res[m] = {"n": k, "valid": float(np.mean(valid)), "us_per_match": 1e6 * dt / k,
+                      "line": _stats(err[:, 0], valid, truth[:k, 0]),
+                      "col": _stats(err[:, 1], valid, truth[:k, 1])}
+        out["results"][case] = res
+    return out
+
+
+def format_table(result) -> str:
+    """Plain-text table of a :func:`bench_matching` result."""
+    cfg = result["config"]
+    head = (f"window {cfg['window'][0]}x{cfg['window'][1]}, shifts U(±{cfg['max_shift']}) px, "
+            f"noise {cfg['noise']} of texture std, n={cfg['n']}, seed={cfg['seed']}")
+    cols = ("case", "method", "valid", "µs/match", "bias_l", "std_l", "lock_l", "bias_c", "std_c", "lock_c")
+    rows = [head, "  ".join(f"{c:>10}" for c in cols)]
+    for case, res in result["results"].items():
+        for m, r in res.items():
+            vals = [case, m, f"{r['valid']:.3f}", f"{r['us_per_match']:.1f}",
+                    f"{r['line']['bias']:+.4f}", f"{r['line']['std']:.4f}", f"{r['line']['locking']:.4f}",
+                    f"{r['col']['bias']:+.4f}", f"{r['col']['std']:.4f}", f"{r['col']['locking']:.4f}"]
+            rows.append("  ".join(f"{v:>10}" for v in vals))
+    return "\n".join(rows)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    print(format_table(bench_matching()))

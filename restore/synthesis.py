@@ -1,0 +1,202 @@
+"""Instant synthesis (patent step b; CNES §3.3.2).
+
+For one band pair (A ahead, B behind, delay τ), every matched point gives a
+residual ``measured − predicted`` position in band B (lines, columns). With
+the attitude error δθ(t) = true − known, a point of line ``l`` of A gives, to
+first order,
+
+    residual ≈ S_B · (δθ(t_l + τ') − δθ(t_l)) = S_B · Δθ(t_l, τ)
+
+where ``S_B = ∂(line, column)/∂(roll, pitch, yaw)`` is the sensitivity of the
+image position in B (from the sensor model). Per line of A, the attitude
+differentials ΔR, ΔT, ΔL are fitted by least squares weighted by match
+quality, with iterated 3σ rejection of outliers. Lines with too few good
+points are gaps (NaN), never zeros.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["SynthesisResult", "instant_synthesis", "highpass_nan"]
+
+AXES = ("roll", "pitch", "yaw")
+
+
+@dataclass
+class SynthesisResult:
+    """Per-line attitude differentials of one pair.
+
+    Attributes
+    ----------
+    diff : ndarray (n_lines, 3)
+        ΔR, ΔT, ΔL [rad] per line of band A (NaN = gap).
+    sigma : ndarray (n_lines, 3)
+        Formal 1-σ uncertainty of each differential [rad] (NaN = gap).
+    n_points : ndarray (n_lines,)
+        Inlier points used per line.
+    inlier : ndarray (n_points,) bool
+        Points kept after the outlier rejection.
+    residual_rms_px : float
+        RMS of the post-fit residuals of the inliers [px].
+    """
+
+    diff: np.ndarray
+    sigma: np.ndarray
+    n_points: np.ndarray
+    inlier: np.ndarray
+    residual_rms_px: float
+    fitted_axes: tuple
+
+
+def _accumulate(lines, rows_l, rows_c, res_l, res_c, w, n_lines, k):
+    """Per-line normal matrices (n_lines, k, k) and right-hand sides (n_lines, k)."""
+    nm = np.zeros((n_lines, k, k))
+    rhs = np.zeros((n_lines, k))
+    for a in range(k):
+        rhs[:, a] = (np.bincount(lines, w * (rows_l[:, a] * res_l + rows_c[:, a] * res_c), minlength=n_lines))
+        for b in range(a, k):
+            v = np.bincount(lines, w * (rows_l[:, a] * rows_l[:, b] + rows_c[:, a] * rows_c[:, b]), minlength=n_lines)
+            nm[:, a, b] = v
+            nm[:, b, a] = v
+    return nm, rhs
+
+
+def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *, n_lines: int, weights=None,
+                      axes=AXES, min_points: int = 4, n_sigma: float = 3.0, max_iter: int = 5,
+                      sigma_floor_px: float = 1e-4) -> SynthesisResult:
+    """Fit attitude differentials per line from point residuals.
+
+    Parameters
+    ----------
+    lines : array of int (n,)
+        Line of band A of each point (the sample index of the differential).
+    residual_lines, residual_columns : array (n,)
+        Measured − predicted position in band B [px].
+    sensitivities : array (n, 2, 3)
+        ∂(line, column)/∂(roll, pitch, yaw) at each point in band B [px/rad].
+    n_lines : int
+        Number of lines (length of the output).
+    weights : array (n,), optional
+        Match-quality weights (default 1).
+    axes : sequence of str
+        Axes to fit (subset of roll, pitch, yaw); the others are reported as NaN.
+    min_points : int
+        Minimum inliers for a line to be estimated (else it is a gap).
+    n_sigma : float
+        Rejection threshold (iterated), in robust standard deviations of the
+        residuals of the whole pair, per image axis.
+    max_iter : int
+        Rejection iterations.
+
+    Returns
+    -------
+    SynthesisResult
+    """
+    lines = np.asarray(lines, dtype=np.int64)
+    rl = np.asarray(residual_lines, dtype=np.float64)
+    rc = np.asarray(residual_columns, dtype=np.float64)
+    s = np.asarray(sensitivities, dtype=np.float64)
+    n = lines.size
+    if s.shape != (n, 2, 3):
+        raise ValueError(f"sensitivities: expected shape ({n}, 2, 3), got {s.shape}")
+    if min_points < 2:
+        raise ValueError(f"min_points: must be >= 2, got {min_points}")
+    unknown = [a for a in axes if a not in AXES]
+    if unknown:
+        raise ValueError(f"axes: unknown axis {unknown[0]!r}; allowed: roll, pitch, yaw")
+    idx = [AXES.index(a) for a in axes]
+    k = len(idx)
+    w = np.ones(n) if weights is None else np.asarray(weights, dtype=np.float64).copy()
+    ok = np.isfinite(rl) & np.isfinite(rc) & np.isfinite(w) & (w > 0) & np.all(np.isfinite(s), axis=(1, 2))
+    ok &= (lines >= 0) & (lines < n_lines)
+    rows_l = s[:, 0, idx]
+    rows_c = s[:, 1, idx]
+    # scale unknowns to µrad-ish magnitude for conditioning
+    scale = 1e-6
+    rows_l = rows_l * scale
+    rows_c = rows_c * scale
+    inl = ok.copy()
+    x = np.full((n_lines, k), np.nan)
+    cov_diag = np.full((n_lines, k), np.nan)
+    npts = np.zeros(n_lines, dtype=np.int64)
+    sig_l = sig_c = 1.0
+    rms = np.nan
+    for it in range(max_iter + 1):
+        li = np.where(inl, lines, 0)
+        wi = np.where(inl, w, 0.0)
+        rli = np.where(inl, rl, 0.0)
+        rci = np.where(inl, rc, 0.0)
+        nm, rhs = _accumulate(li, rows_l, rows_c, rli, rci, wi, n_lines, k)
+        npts = np.bincount(li[inl], minlength=n_lines)
+        good = npts >= min_points
+        # guard against singular systems
+        det_ok = np.zeros(n_lines, dtype=bool)
+        if good.any():
+            with np.errstate(all="ignore"):
+                cond = np.linalg.cond(nm[good])
+            det_ok[np.flatnonzero(good)] = np.isfinite(cond) & (cond < 1e10)
+        good &= det_ok
+        x[:] = np.nan
+        if good.any():
+            sol = np.linalg.solve(nm[good], rhs[good][..., None])[..., 0]
+            x[good] = sol
+        # residuals of every point against its line's fit
+        xp = x[lines]
+        fit_l = np.einsum("nk,nk->n", rows_l, np.nan_to_num(xp))
+        fit_c = np.einsum("nk,nk->n", rows_c, np.nan_to_num(xp))
+        has = np.all(np.isfinite(xp), axis=1)
+        el = rl - fit_l
+        ec = rc - fit_c
+        use = inl & has
+        if use.sum() < 3:
+            break
+        sig_l = max(1.4826 * np.median(np.abs(el[use] - np.median(el[use]))), sigma_floor_px)
+        sig_c = max(1.4826 * np.median(np.abs(ec[use] - np.median(ec[use]))), sigma_floor_px)
+        rms = float(np.sqrt(np.mean(np.concatenate([el[use], ec[use]]) ** 2)))
+        if it == max_iter:
+            break
+        new = ok & has & (np.abs(el) <= n_sigma * sig_l) & (np.abs(ec) <= n_sigma * sig_c)
+        new |= ok & ~has & inl  # keep points of lines not (yet) estimable
+        if np.array_equal(new, inl):
+            break
+        inl = new
+    # formal covariance: (Nm)^-1 scaled by the residual variance (weights are relative)
+    good = np.all(np.isfinite(x), axis=1)
+    if good.any():
+        nm, _ = _accumulate(np.where(inl, lines, 0), rows_l, rows_c, np.zeros(n), np.zeros(n),
+                            np.where(inl, w, 0.0), n_lines, k)
+        s2 = 0.5 * (sig_l ** 2 + sig_c ** 2)
+        inv = np.linalg.inv(nm[good])
+        cov_diag[good] = np.sqrt(np.maximum(np.einsum("nii->ni", inv), 0) * s2)
+    diff = np.full((n_lines, 3), np.nan)
+    sigma = np.full((n_lines, 3), np.nan)
+    diff[:, idx] = x * scale
+    sigma[:, idx] = cov_diag * scale
+    return SynthesisResult(diff=diff, sigma=sigma, n_points=npts, inlier=inl, residual_rms_px=rms,
+                           fitted_axes=tuple(axes))
+
+
+def highpass_nan(signal: np.ndarray, *, dt: float, cutoff_hz: float) -> np.ndarray:
+    """Remove frequencies below ``cutoff_hz`` from a gappy signal (NaN kept as NaN).
+
+    Subtracts a NaN-aware Gaussian-smoothed copy (normalised convolution) whose
+    −3 dB point is at ``cutoff_hz``.
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    if cutoff_hz <= 0:
+        raise ValueError(f"cutoff_hz: must be > 0, got {cutoff_hz}")
+    x = np.asarray(signal, dtype=np.float64)
+    m = np.isfinite(x)
+    if not m.any():
+        return x.copy()
+    # Gaussian transfer exp(-2π²σ²f²) = 1/√2 at f_c  ⇒ σ = sqrt(ln 2) / (2π f_c)
+    sigma = np.sqrt(np.log(2.0)) / (2 * np.pi * cutoff_hz) / dt
+    num = gaussian_filter1d(np.where(m, x, 0.0), sigma, mode="nearest")
+    den = gaussian_filter1d(m.astype(np.float64), sigma, mode="nearest")
+    low = num / np.maximum(den, 1e-12)
+    out = x - low
+    out[~m] = np.nan
+    return out

@@ -1,0 +1,241 @@
+"""The ``simsat`` command line.
+
+simsat's library modules know nothing of restoration or reports; this module
+is the application shell that chains them, so it imports ``restore`` and
+``reports`` lazily, inside the commands that need them.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+__all__ = ["main"]
+
+
+class CliError(Exception):
+    """An error to print as one line (no traceback)."""
+
+
+def _print_err(msg: str) -> None:
+    print(f"simsat: error: {msg}", file=sys.stderr)
+
+
+def _parse_set(items: list[str] | None) -> dict:
+    """``--set key.sub=value`` overrides (value parsed as TOML)."""
+    import tomllib
+
+    out: dict = {}
+    for item in items or []:
+        if "=" not in item:
+            raise CliError(f"--set {item!r}: expected KEY=VALUE (e.g. acquisition.lines=512)")
+        key, value = item.split("=", 1)
+        try:
+            parsed = tomllib.loads(f"v = {value}")["v"]
+        except Exception:
+            parsed = value
+        d = out
+        parts = key.strip().split(".")
+        for p in parts[:-1]:
+            d = d.setdefault(p, {})
+        d[parts[-1]] = parsed
+    return out
+
+
+# --------------------------------------------------------------------------- commands
+def cmd_scenarios(args) -> int:
+    from .scenario import builtin_scenarios, load_scenario
+
+    for name, path in builtin_scenarios().items():
+        try:
+            sc = load_scenario(path, check_models=False)
+            d = sc.instrument.detectors
+            size = f"{sc.acquisition.lines} lines x {d[0].pixels} px x {len(d)} bands"
+            print(f"{name:10s} {size:34s} {sc.description}")
+        except Exception as e:  # pragma: no cover - a broken built-in is a bug
+            print(f"{name:10s} (invalid: {e})")
+    print(f"\n(files in {next(iter(builtin_scenarios().values())).parent})")
+    return 0
+
+
+def cmd_validate(args) -> int:
+    from .scenario import load_scenario
+
+    sc = load_scenario(args.scenario, overrides=_parse_set(args.set))
+    _validate_later_stages(sc)
+    d = sc.instrument.detectors
+    print(f"{sc.source or args.scenario}: OK — {sc.name}: {sc.acquisition.lines} lines x {d[0].pixels} px, "
+          f"{len(d)} bands ({', '.join(x.name for x in d)}), scene x ∈ [{sc.x_range_m[0]:.0f}, {sc.x_range_m[1]:.0f}] m")
+    return 0
+
+
+def _validate_later_stages(sc) -> None:
+    try:
+        from restore.pipeline import restoration_settings
+    except ImportError:  # pragma: no cover
+        return
+    restoration_settings(sc.section("restoration"))
+
+
+def cmd_render(args) -> int:
+    from .scenario import load_scenario
+    from .simulate import simulate
+
+    sc = load_scenario(args.scenario, overrides=_parse_set(args.set))
+    out = Path(args.out) if args.out else Path("runs") / sc.name
+    res = simulate(sc, out, progress=not args.quiet)
+    rs = res.render_stats
+    print(f"wrote {out}/product.nc, truth.nc, run.json — {rs['rays']:,} rays in {rs['wall_s']:.1f} s "
+          f"({rs['rays_per_s'] / 1e6:.2f} Mrays/s, {rs['variant']}); total {res.timings['total_s']:.1f} s")
+    return 0
+
+
+def cmd_restore(args) -> int:
+    from restore.pipeline import restore_run
+
+    res = restore_run(args.run_dir, overrides=_parse_set(args.set), progress=not args.quiet)
+    print(res.summary())
+    return 0
+
+
+def cmd_report(args) -> int:
+    from reports.run_report import make_run_report
+
+    path = make_run_report(args.run_dir, out_dir=args.out)
+    print(f"wrote {path}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    from .scenario import load_scenario
+    from .simulate import simulate
+
+    sc = load_scenario(args.scenario, overrides=_parse_set(args.set))
+    _validate_later_stages(sc)
+    out = Path(args.out) if args.out else Path("runs") / sc.name
+    res = simulate(sc, out, progress=not args.quiet)
+    print(f"rendered {out} in {res.timings['total_s']:.1f} s")
+    from restore.pipeline import restore_run
+
+    rres = restore_run(out, progress=not args.quiet)
+    print(rres.summary())
+    try:
+        from reports.run_report import make_run_report
+    except ImportError:  # pragma: no cover
+        return 0
+    path = make_run_report(out)
+    print(f"report: {path}")
+    return 0
+
+
+def cmd_figures(args) -> int:
+    from reports.figures import make_patent_figures
+
+    paths = make_patent_figures(Path(args.out), monte_carlo=not args.no_monte_carlo, seed=args.seed)
+    for p in paths:
+        print(p)
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from reports import bench
+
+    result = bench.run_bench(args.what, scenario=args.scenario, out=args.out, lines=args.lines, seed=args.seed)
+    print(bench.format_result(args.what, result))
+    print(f"\nwrote {result['_path']}")
+    return 0
+
+
+# --------------------------------------------------------------------------- parser
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="simsat", description="Push-broom LOS jitter simulator and restoration testbed")
+    from . import __version__
+    p.add_argument("--version", action="version", version=f"simsat {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
+    s = sub.add_parser("scenarios", help="list the built-in scenarios")
+    s.set_defaults(func=cmd_scenarios)
+
+    s = sub.add_parser("validate", help="check a scenario file without rendering")
+    s.add_argument("scenario", help="scenario TOML file or built-in name")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scenario key")
+    s.set_defaults(func=cmd_validate)
+
+    s = sub.add_parser("render", help="render a scenario into a product (product.nc, truth.nc, run.json)")
+    s.add_argument("scenario", help="scenario TOML file or built-in name")
+    s.add_argument("--out", help="output run directory (default runs/<name>)")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scenario key, e.g. acquisition.lines=512")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=cmd_render)
+
+    s = sub.add_parser("restore", help="restore the LOS attitude of a rendered product (writes restoration.nc)")
+    s.add_argument("run_dir")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a [restoration] key, e.g. method=wiener")
+    s.add_argument("--quiet", action="store_true")
+    s.set_defaults(func=cmd_restore)
+
+    s = sub.add_parser("report", help="write the HTML report of a run")
+    s.add_argument("run_dir")
+    s.add_argument("--out", help="report directory (default RUN_DIR/report)")
+    s.set_defaults(func=cmd_report)
+
+    s = sub.add_parser("run", help="render → restore → report in one go")
+    s.add_argument("scenario")
+    s.add_argument("--out")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE")
+    s.add_argument("--quiet", action="store_true")
+    s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("figures", help="the founding patent's figures 7–14 (PNG + CSV)")
+    s.add_argument("--out", default="figures")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--no-monte-carlo", action="store_true", help="analytic curves only")
+    s.set_defaults(func=cmd_figures)
+
+    s = sub.add_parser("bench", help="benchmarks (results printed and written as JSON)")
+    s.add_argument("what", choices=["render", "restore", "matching", "integration"])
+    s.add_argument("--scenario", default=None, help="scenario (render/restore; default phr_cmg)")
+    s.add_argument("--lines", type=int, default=None, help="override acquisition.lines")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--out", default=None, help="JSON output file (default bench/<what>.json)")
+    s.set_defaults(func=cmd_bench)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    from .config import ScenarioError
+    from .product import ProductError
+
+    try:
+        return int(args.func(args) or 0)
+    except (ScenarioError, ProductError, CliError) as e:
+        _print_err(str(e))
+        return 2
+    except FileNotFoundError as e:
+        _print_err(f"{e.filename}: file not found" if e.filename else str(e))
+        return 2
+    except KeyboardInterrupt:
+        _print_err("interrupted")
+        return 130
+    except Exception as e:
+        # library-level validation errors (ValueError naming the field) and
+        # restoration failures are user-facing; anything else is a bug.
+        from_restore = type(e).__module__.split(".")[0] in ("restore", "reports")
+        if isinstance(e, ValueError) or from_restore:
+            _print_err(str(e).splitlines()[0] if str(e) else type(e).__name__)
+            return 2
+        if os.environ.get("SIMSAT_DEBUG"):
+            raise
+        _print_err(f"internal error ({type(e).__name__}: {e}); set SIMSAT_DEBUG=1 for the traceback")
+        return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,218 @@
+"""Product, truth and run files: writing (atomically) and reading.
+
+A run directory holds:
+
+* ``product.nc`` — what a ground segment receives: ``image_<band>`` (line,
+  column) DN, ``time`` [s] per line, platform ephemeris, *knowledge* attitude,
+  focal-plane geometry and band delays, the DEM the ground knows;
+* ``truth.nc`` — never read by restoration: ``time`` [s] and ``roll``,
+  ``pitch``, ``yaw`` [rad] of the true line of sight (sampled finer than the
+  line period) and the true DEM;
+* ``run.json`` — the resolved scenario, seed, versions and timings.
+
+Files are written to a temporary name in the same directory and renamed, so a
+crashed run never leaves a file that looks whole.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["atomic_write_dataset", "atomic_write_json", "atomic_write_bytes", "Product", "read_product",
+           "read_truth", "ProductError", "NETCDF_ENCODING", "clamped_attitude"]
+
+
+class ProductError(ValueError):
+    """A run directory or product file is missing or malformed (message names the file)."""
+
+
+NETCDF_ENCODING = {"zlib": True, "complevel": 4, "shuffle": True}
+
+
+def _tmp_path(path: Path) -> Path:
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    os.close(fd)
+    return Path(name)
+
+
+def atomic_write_dataset(ds, path: str | Path, *, compress: bool = True) -> Path:
+    """Write an xarray Dataset to NetCDF atomically (temp file + rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _tmp_path(path)
+    enc = {}
+    if compress:
+        for k, v in ds.data_vars.items():
+            if v.dtype.kind in "fiu" and v.ndim >= 1:
+                enc[k] = dict(NETCDF_ENCODING)
+    try:
+        ds.to_netcdf(tmp, engine="netcdf4", encoding=enc)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def atomic_write_bytes(data: bytes, path: str | Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _tmp_path(path)
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def atomic_write_json(obj, path: str | Path) -> Path:
+    return atomic_write_bytes((json.dumps(obj, indent=2, sort_keys=True, default=_json_default) + "\n").encode(), path)
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def _open(path: Path):
+    import xarray as xr
+
+    if not path.exists():
+        raise ProductError(f"{path}: file not found")
+    try:
+        return xr.load_dataset(path, engine="netcdf4")
+    except Exception as e:  # corrupted / not NetCDF
+        raise ProductError(f"{path}: cannot read as NetCDF ({type(e).__name__}: {e})") from None
+
+
+@dataclass
+class Product:
+    """A product as read by the ground segment (never contains truth).
+
+    Attributes
+    ----------
+    ds : xarray.Dataset
+        The raw dataset.
+    platform, instrument : the geometry needed by the sensor model.
+    knowledge : simsat.attitude.AttitudeSeries
+        AOCS knowledge of the line-of-sight attitude.
+    dem : simsat.terrain.Dem
+        The DEM the ground knows.
+    """
+
+    path: Path
+    ds: object
+    platform: object
+    instrument: object
+    knowledge: object
+    dem: object
+    star_tracker: object | None = None
+
+    @property
+    def time(self) -> np.ndarray:
+        return np.asarray(self.ds["time"].values, dtype=np.float64)
+
+    @property
+    def band_names(self) -> list[str]:
+        return [d.name for d in self.instrument.detectors]
+
+    @property
+    def reference_detector(self) -> str:
+        return str(self.ds.attrs.get("reference_detector", self.band_names[0]))
+
+    @property
+    def pixel_ifov_rad(self) -> float:
+        return self.instrument.ifov_rad(self.reference_detector)
+
+    def image(self, name: str) -> np.ndarray:
+        """Band image as float32 (DN)."""
+        key = f"image_{name}"
+        if key not in self.ds:
+            raise ProductError(f"{self.path}: no variable {key!r} (bands: {', '.join(self.band_names)})")
+        return np.asarray(self.ds[key].values, dtype=np.float32)
+
+    def sensor_model(self, attitude=None):
+        """Sensor model with the product's geometry (default attitude: knowledge)."""
+        from .sensor_model import SensorModel
+
+        return SensorModel(platform=self.platform, instrument=self.instrument, dem=self.dem,
+                           attitude=attitude or clamped_attitude(self.knowledge), t0_s=float(self.ds.attrs["t0_s"]))
+
+    def delay_s(self, ahead: str, behind: str) -> float:
+        return self.sensor_model().nominal_delay_s(ahead, behind)
+
+
+def clamped_attitude(series):
+    """Attitude callable of a sampled series, held constant beyond its ends (no extrapolation)."""
+    t0, t1 = float(series.time[0]), float(series.time[-1])
+
+    def fn(t):
+        return series.at(np.clip(np.asarray(t, dtype=np.float64), t0, t1))
+    return fn
+
+
+def read_product(run_dir: str | Path) -> Product:
+    """Read ``product.nc`` of a run directory (or a product file path)."""
+    from .attitude import AttitudeSeries
+    from .instrument import Detector, Instrument, Radiometry
+    from .platform import Platform
+    from .terrain import Dem
+
+    p = Path(run_dir)
+    if p.is_dir():
+        p = p / "product.nc"
+    if not p.exists():
+        raise ProductError(f"{p}: product file not found (run `simsat render SCENARIO --out DIR` first)")
+    ds = _open(p)
+    try:
+        a = ds.attrs
+        dets = []
+        for i, name in enumerate([str(s) for s in ds["detector"].values]):
+            dets.append(Detector(name=name, band=str(ds["detector_band"].values[i]),
+                                 along_m=float(ds["detector_along_m"].values[i]),
+                                 across_m=float(ds["detector_across_m"].values[i]),
+                                 pixels=int(ds["detector_pixels"].values[i]),
+                                 pitch_m=float(ds["detector_pitch_m"].values[i])))
+        inst = Instrument(focal_length_m=float(a["focal_length_m"]), line_period_s=float(a["line_period_s"]),
+                          detectors=tuple(dets), mtf_nyquist=float(a.get("mtf_nyquist", 1.0)),
+                          radiometry=Radiometry(bits=int(a.get("bits", 12))))
+        plat = Platform(altitude_m=float(a["altitude_m"]), ground_speed_m_s=float(a["ground_speed_m_s"]),
+                        x_at_t0_m=float(a["platform_x_at_t0_m"]), y_m=float(a["platform_y_m"]),
+                        off_nadir_roll_rad=float(a.get("off_nadir_roll_rad", 0.0)),
+                        off_nadir_pitch_rad=float(a.get("off_nadir_pitch_rad", 0.0)))
+        kn = AttitudeSeries(time=np.asarray(ds["knowledge_time"].values, dtype=np.float64),
+                            roll=np.asarray(ds["knowledge_roll"].values, dtype=np.float64),
+                            pitch=np.asarray(ds["knowledge_pitch"].values, dtype=np.float64),
+                            yaw=np.asarray(ds["knowledge_yaw"].values, dtype=np.float64))
+        dem = Dem(x0_m=float(ds["dem_x"].values[0]), y0_m=float(ds["dem_y"].values[0]),
+                  dx_m=float(ds.attrs["dem_dx_m"]), dy_m=float(ds.attrs["dem_dy_m"]),
+                  z=np.asarray(ds["dem"].values, dtype=np.float64))
+        st = None
+        if "star_tracker_time" in ds:
+            st = AttitudeSeries(time=np.asarray(ds["star_tracker_time"].values, dtype=np.float64),
+                                roll=np.asarray(ds["star_tracker_roll"].values, dtype=np.float64),
+                                pitch=np.asarray(ds["star_tracker_pitch"].values, dtype=np.float64),
+                                yaw=np.asarray(ds["star_tracker_yaw"].values, dtype=np.float64))
+    except KeyError as e:
+        raise ProductError(f"{p}: malformed product, missing {e}") from None
+    return Product(path=p, ds=ds, platform=plat, instrument=inst, knowledge=kn, dem=dem, star_tracker=st)
+
+
+def read_truth(run_dir: str | Path):
+    """Read ``truth.nc`` (for reports and benchmarks only — never for restoration)."""
+    p = Path(run_dir)
+    if p.is_dir():
+        p = p / "truth.nc"
+    return _open(p)

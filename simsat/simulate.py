@@ -1,0 +1,239 @@
+"""Scenario → rendered multi-band product + exact truth (the `simsat render` command)."""
+from __future__ import annotations
+
+import json
+import os
+import platform as _pyplatform
+import shutil
+import sys
+import tempfile
+import time as _time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .product import atomic_write_dataset, atomic_write_json
+from .scenario import Scenario, load_scenario
+
+__all__ = ["simulate", "apply_radiometry", "SimulationResult", "build_world"]
+
+
+@dataclass
+class SimulationResult:
+    out_dir: Path
+    timings: dict = field(default_factory=dict)
+    render_stats: dict = field(default_factory=dict)
+
+
+def _seed_seq(seed: int, *keys: int) -> np.random.SeedSequence:
+    return np.random.SeedSequence([int(seed), *[int(k) for k in keys]])
+
+
+def apply_radiometry(radiance: np.ndarray, radiometry, *, seed: int, band_index: int, first_line: int = 0) -> np.ndarray:
+    """Photon + read noise and quantisation of a radiance image → uint16 DN.
+
+    ``radiance`` is reflectance × irradiance (≈ [0, 1]); the signal is
+    ``radiance · full_well · signal_fraction`` electrons. Noise draws use one
+    seeded generator per line, so the result does not depend on block sizes.
+    """
+    r = radiometry
+    e = np.asarray(radiance, dtype=np.float64) * (r.full_well_e * r.signal_fraction)
+    if r.enabled:
+        noisy = np.empty_like(e)
+        for i in range(e.shape[0]):
+            rng = np.random.default_rng(_seed_seq(seed, 101, band_index, first_line + i))
+            line = e[i]
+            sigma = np.sqrt(np.maximum(line, 0.0) + r.read_noise_e ** 2)
+            noisy[i] = line + sigma * rng.standard_normal(line.shape)
+        e = noisy
+    dn = np.rint(np.clip(e, 0.0, r.full_well_e) * r.gain_dn_per_e)
+    return dn.astype(np.uint16)
+
+
+def build_world(sc: Scenario):
+    """Models of a scenario: attitude model, true/known DEMs, texture, irradiance grid."""
+    from . import terrain
+
+    model = sc.attitude_model()
+    dem, known = sc.dems()
+    texture = sc.texture()
+    sun = sc.sun()
+    irr = terrain.irradiance_dem(dem, sun)
+    return model, dem, known, texture, irr
+
+
+def _versions() -> dict:
+    out = {"python": sys.version.split()[0], "platform": _pyplatform.platform()}
+    for mod in ("numpy", "scipy", "mitsuba", "drjit", "xarray", "netCDF4", "cv2"):
+        try:
+            m = __import__(mod)
+            out[mod] = getattr(m, "__version__", "?")
+        except Exception:  # pragma: no cover
+            out[mod] = None
+    from . import __version__
+    out["simsat"] = __version__
+    return out
+
+
+def simulate(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: bool = True,
+             overwrite: bool = True) -> SimulationResult:
+    """Render a scenario into ``out_dir`` (product.nc, truth.nc, run.json).
+
+    Everything is first written into a temporary sibling directory which is
+    renamed to ``out_dir`` at the end: a crashed run leaves no product that
+    looks whole.
+    """
+    import xarray as xr
+    from .attitude import AttitudeSeries
+    from .render.pushbroom import PushbroomRenderer
+
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    out_dir = Path(out_dir)
+    timings = {}
+    t_all = _time.perf_counter()
+
+    t = _time.perf_counter()
+    model, dem, known_dem, texture, irr = build_world(sc)
+    timings["world_s"] = _time.perf_counter() - t
+
+    inst = sc.instrument
+    lines = sc.acquisition.lines
+    t_lines = sc.line_times
+
+    t = _time.perf_counter()
+    renderer = PushbroomRenderer(platform=sc.platform, instrument=inst, dem=dem, texture=texture,
+                                 attitude=model.evaluate, irradiance=irr)
+    timings["scene_build_s"] = _time.perf_counter() - t
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=lines, unit="line", desc=f"render {sc.name}", file=sys.stderr, dynamic_ncols=True)
+    t = _time.perf_counter()
+    try:
+        radiance = renderer.render(t_lines, block_lines=sc.acquisition.block_lines,
+                                   progress=(bar.update if bar is not None else None))
+    finally:
+        if bar is not None:
+            bar.close()
+    timings["render_s"] = _time.perf_counter() - t
+
+    t = _time.perf_counter()
+    images = {name: apply_radiometry(img, inst.radiometry, seed=sc.seed, band_index=i)
+              for i, (name, img) in enumerate(radiance.items())}
+    timings["radiometry_s"] = _time.perf_counter() - t
+
+    # knowledge and star tracker
+    kn = model.knowledge_series()
+    st = model.star_tracker_series()
+
+    # truth: at line period / time_subsamples, covering every integration window
+    nt = max(inst.time_subsamples, 2)
+    dt_truth = inst.line_period_s / nt
+    t_truth = np.arange(t_lines[0] - inst.line_period_s, t_lines[-1] + inst.line_period_s + 1e-12, dt_truth)
+    tr, tp, ty = model.evaluate(t_truth)
+
+    ds = _product_dataset(sc, images, t_lines, kn, st, known_dem)
+    truth = xr.Dataset(
+        {"roll": ("time", tr, {"units": "rad", "long_name": "true line-of-sight roll"}),
+         "pitch": ("time", tp, {"units": "rad", "long_name": "true line-of-sight pitch"}),
+         "yaw": ("time", ty, {"units": "rad", "long_name": "true line-of-sight yaw"}),
+         "dem": (("dem_y", "dem_x"), np.asarray(dem.z, dtype=np.float64), {"units": "m", "long_name": "true DEM"})},
+        coords={"time": ("time", t_truth, {"units": "s"}),
+                "dem_x": ("dem_x", dem.x0_m + np.arange(dem.z.shape[1]) * dem.dx_m, {"units": "m"}),
+                "dem_y": ("dem_y", dem.y0_m + np.arange(dem.z.shape[0]) * dem.dy_m, {"units": "m"})},
+        attrs={"title": "simsat truth — NEVER read by restoration", "scenario": sc.name, "seed": sc.seed,
+               "pixel_ifov_rad": inst.ifov_rad(sc.acquisition.reference_detector),
+               "dem_dx_m": float(dem.dx_m), "dem_dy_m": float(dem.dy_m)})
+
+    # write everything into a temp dir, then move into place
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".part", dir=out_dir.parent))
+    try:
+        t = _time.perf_counter()
+        atomic_write_dataset(ds, tmp / "product.nc")
+        atomic_write_dataset(truth, tmp / "truth.nc")
+        timings["write_s"] = _time.perf_counter() - t
+        timings["total_s"] = _time.perf_counter() - t_all
+        rs = renderer.stats
+        render_stats = {"variant": rs.variant, "rays": rs.rays, "wall_s": rs.wall_s, "rays_per_s": rs.rays_per_s,
+                        "intersect_s": rs.intersect_s, "raygen_s": rs.raygen_s, "texture_s": rs.texture_s,
+                        "shade_s": rs.shade_s, "blocks": rs.blocks, "misses": rs.misses}
+        run = {"scenario": sc.to_dict(), "seed": sc.seed, "name": sc.name, "versions": _versions(),
+               "timings": timings, "render": render_stats,
+               "files": {"product": "product.nc", "truth": "truth.nc"}}
+        atomic_write_json(run, tmp / "run.json")
+        if out_dir.exists():
+            if not overwrite:
+                raise FileExistsError(f"{out_dir}: exists")
+            old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".old", dir=out_dir.parent))
+            os.replace(out_dir, old / "x")
+            os.replace(tmp, out_dir)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return SimulationResult(out_dir=out_dir, timings=timings, render_stats=render_stats)
+
+
+def _product_dataset(sc: Scenario, images: dict, t_lines, kn, st, known_dem):
+    import xarray as xr
+
+    inst = sc.instrument
+    plat = sc.platform
+    dets = inst.detectors
+    npix = {d.pixels for d in dets}
+    data = {}
+    coords = {"line": ("line", np.arange(len(t_lines), dtype=np.int32)),
+              "time": ("line", np.asarray(t_lines, dtype=np.float64), {"units": "s", "long_name": "line time"}),
+              "detector": ("detector", np.array([d.name for d in dets]))}
+    for d in dets:
+        col_dim = "column" if len(npix) == 1 else f"column_{d.name}"
+        data[f"image_{d.name}"] = ((("line", col_dim)), images[d.name],
+                                   {"units": "DN", "band": d.band, "detector": d.name,
+                                    "long_name": f"raw image of detector {d.name} ({d.band})"})
+    pos = plat.position(np.asarray(t_lines))
+    data["ephemeris"] = (("line", "xyz"), pos, {"units": "m", "long_name": "platform position, local frame"})
+    data["detector_band"] = ("detector", np.array([d.band for d in dets]))
+    data["detector_along_m"] = ("detector", np.array([d.along_m for d in dets]), {"units": "m"})
+    data["detector_across_m"] = ("detector", np.array([d.across_m for d in dets]), {"units": "m"})
+    data["detector_pixels"] = ("detector", np.array([d.pixels for d in dets], dtype=np.int32))
+    data["detector_pitch_m"] = ("detector", np.array([d.pitch_m for d in dets]), {"units": "m"})
+    data["knowledge_roll"] = ("knowledge_time", kn.roll, {"units": "rad", "long_name": "AOCS knowledge roll"})
+    data["knowledge_pitch"] = ("knowledge_time", kn.pitch, {"units": "rad"})
+    data["knowledge_yaw"] = ("knowledge_time", kn.yaw, {"units": "rad"})
+    coords["knowledge_time"] = ("knowledge_time", kn.time, {"units": "s"})
+    if st is not None:
+        data["star_tracker_roll"] = ("star_tracker_time", st.roll, {"units": "rad"})
+        data["star_tracker_pitch"] = ("star_tracker_time", st.pitch, {"units": "rad"})
+        data["star_tracker_yaw"] = ("star_tracker_time", st.yaw, {"units": "rad"})
+        coords["star_tracker_time"] = ("star_tracker_time", st.time, {"units": "s"})
+    # band delays for every ordered pair (ahead, behind)
+    pairs, taus = [], []
+    for a in dets:
+        for b in dets:
+            if a.name != b.name and a.along_m > b.along_m:
+                pairs.append(f"{a.name}/{b.name}")
+                taus.append(sc.delay_s(a.name, b.name))
+    data["delay_s"] = ("pair", np.array(taus), {"units": "s", "long_name": "nominal delay: behind sees what ahead saw"})
+    coords["pair"] = ("pair", np.array(pairs))
+    data["dem"] = (("dem_y", "dem_x"), np.asarray(known_dem.z, dtype=np.float64),
+                   {"units": "m", "long_name": "DEM known by the ground segment"})
+    coords["dem_x"] = ("dem_x", known_dem.x0_m + np.arange(known_dem.z.shape[1]) * known_dem.dx_m, {"units": "m"})
+    coords["dem_y"] = ("dem_y", known_dem.y0_m + np.arange(known_dem.z.shape[0]) * known_dem.dy_m, {"units": "m"})
+    attrs = {
+        "title": f"simsat product {sc.name}", "scenario": sc.name, "conventions": "simsat-1",
+        "t0_s": float(sc.t0_s), "line_period_s": inst.line_period_s, "focal_length_m": inst.focal_length_m,
+        "altitude_m": plat.altitude_m, "ground_speed_m_s": plat.ground_speed_m_s,
+        "platform_x_at_t0_m": plat.x_at_t0_m, "platform_y_m": plat.y_m,
+        "off_nadir_roll_rad": plat.off_nadir_roll_rad, "off_nadir_pitch_rad": plat.off_nadir_pitch_rad,
+        "reference_detector": sc.acquisition.reference_detector,
+        "pixel_ifov_rad": inst.ifov_rad(sc.acquisition.reference_detector),
+        "mtf_nyquist": inst.mtf_nyquist, "bits": inst.radiometry.bits,
+        "dem_dx_m": float(known_dem.dx_m), "dem_dy_m": float(known_dem.dy_m),
+        "attitude_convention": "body->local R = Rz(yaw) Ry(pitch) Rx(roll); roll moves image across-track",
+    }
+    return xr.Dataset(data, coords=coords, attrs=attrs)
