@@ -9,8 +9,9 @@ What each figure shows (patent, section I "integración" and section III):
   inverse filter ``1/|G|`` it regularises.  The filter cuts at every harmonic
   n/τ ("corta en todos los armónicos de frecuencia n·f_τ").
 * **Fig. 8** – the *phase* of the same estimator, ``arg H_k = −π/2 − ωτ/2``
-  (mod π at each n/τ), and of the chain, ``arg F_k = 0`` ("el estimador no
-  introduce desfases").
+  plus π at each n/τ crossed, i.e. the sawtooth ``−90° − 180°·frac(fτ)``
+  (wrapped), and of the chain, ``arg F_k = 0`` ("el estimador no introduce
+  desfases").
 * **Figs. 9, 10** – effect of the noise-attenuation coefficient k, other
   parameters as figs. 7–8: fig. 9 the estimator gain ``|H_k|`` (larger k → wider
   cut bands, lower peaks), fig. 10 the chain gain ``F_k`` ("el aumento de k
@@ -77,6 +78,8 @@ __all__ = [
     "draw_fig07", "draw_fig08", "draw_fig09", "draw_fig10",
     "draw_fig11", "draw_fig12", "draw_fig13", "draw_fig14",
     "make_patent_figures",
+    "method_unavailable",
+    "CONSTANT_K_METHOD",
 ]
 
 # ---------------------------------------------------------------------------
@@ -365,6 +368,9 @@ def measure_sinusoid_response(freqs_hz, taus_s: Sequence[float], *, method: str,
         out = np.asarray(integrate(diffs, taus, dt_s, method=method, **options), dtype=float)
         if out.shape != (n_samples,):
             raise RuntimeError(f"integrate returned shape {out.shape}, expected ({n_samples},)")
+        if not np.all(np.isfinite(out[lo:hi])):
+            raise RuntimeError(f"integrate(method={method!r}) returned NaN in the central half "
+                               "of a gap-free record")
         c_out = proj @ out[lo:hi]
         chain[:, r] = c_out / (proj @ theta[lo:hi])
         if single:
@@ -515,6 +521,12 @@ def _label_k(k: float) -> str:
 # Data preparation, figs. 7–12 (single pair)
 # ---------------------------------------------------------------------------
 
+#: Name of the ``restore.integration`` method implementing the patent's
+#: constant-k pseudo-inverse ``H_k = conj(G)/(|G|² + k)`` (multi-pair:
+#: ``conj(G_j)/(Σ|G_i|² + k)``).  In that package ``method="wiener"`` is an
+#: adaptive MAP estimator with a data-estimated PSD prior and takes no ``k``.
+CONSTANT_K_METHOD: str = "inverse"
+
 #: Monte Carlo settings of the single-pair figures: dt such that every τ of
 #: figs. 7–12 is a whole number of samples (7.44 ms = 62 × 0.12 ms).
 WIENER_MC_DT_S: float = 0.12e-3
@@ -522,7 +534,7 @@ WIENER_MC_N: int = 2 ** 15
 
 
 def _wiener_mc(freqs, tau_s, k, *, n_trials, seed, integrate=None):
-    return measure_sinusoid_response(freqs, [tau_s], method="wiener", options={"k": k},
+    return measure_sinusoid_response(freqs, [tau_s], method=CONSTANT_K_METHOD, options={"k": k},
                                      dt_s=WIENER_MC_DT_S, n_samples=WIENER_MC_N,
                                      n_trials=n_trials, seed=seed, integrate=integrate)
 
@@ -552,7 +564,7 @@ def _single_pair_data(number: int, configs: Sequence[tuple[float, float]], quant
     if monte_carlo:
         meta["monte_carlo"] = True
         meta["mc"] = {"dt_s": WIENER_MC_DT_S, "n_samples": WIENER_MC_N, "n_trials": n_trials,
-                      "method": "wiener", "noise_std": 0.05}
+                      "method": CONSTANT_K_METHOD, "noise_std": 0.05}
         for ci, (tau, k) in enumerate(configs):
             series = _label_k(k) if vary == "k" else _label_tau(tau)
             key = ("wiener", tau, k, n_trials, seed, tuple(mc_fractions or ()))
@@ -665,11 +677,14 @@ def _fig13_grid(f_lo: float, f_hi: float, taus: Sequence[float], n_log: int = 15
 
 def fig13_data(*, pairs: Mapping[str, float] = PATENT_PAIRS, k: float = PATENT_K,
                f_range_hz: tuple[float, float] = F_RANGE_FIG13_HZ, monte_carlo: bool = True,
-               n_trials: int = 8, seed: int = 0, fusion_method: str = "fusion",
+               n_trials: int = 8, seed: int = 0, fusion_method: str | None = None,
+               mc_freqs_hz: Sequence[float] = FUSION_MC_FREQS_HZ,
                integrate: Callable | None = None) -> FigureData:
     """Fig. 13: chain gain of each pair, the patent's envelope (max over pairs) and
-    the joint Wiener fusion, k = 0.1.  Monte Carlo: ``integrate(method="wiener")``
-    per pair and ``integrate(method=fusion_method)`` on all four pairs."""
+    the joint Wiener fusion, k = 0.1.  Monte Carlo: ``integrate`` with
+    :data:`CONSTANT_K_METHOD` per pair, and with ``fusion_method`` (default the
+    same method, given all four pairs at once) for the combination."""
+    fusion_method = fusion_method or CONSTANT_K_METHOD
     taus = list(pairs.values())
     f = _fig13_grid(*f_range_hz, taus)
     blocks = [_block("analytic", "chain_gain", name, "1", tau_s=tau, k=k, freq_hz=f,
@@ -683,11 +698,11 @@ def fig13_data(*, pairs: Mapping[str, float] = PATENT_PAIRS, k: float = PATENT_K
                          stderr=np.nan, n_trials=np.nan))
     meta = {"pairs": dict(pairs), "k": k, "f_range_hz": f_range_hz, "monte_carlo": False}
     if monte_carlo:
-        fr = np.array([x for x in FUSION_MC_FREQS_HZ if f_range_hz[0] <= x <= f_range_hz[1]])
+        fr = np.array([x for x in mc_freqs_hz if f_range_hz[0] <= x <= f_range_hz[1]])
         common = dict(dt_s=FUSION_MC_DT_S, n_samples=FUSION_MC_N, n_trials=n_trials,
                       integrate=integrate)
         for j, (name, tau) in enumerate(pairs.items()):
-            mc = measure_sinusoid_response(fr, [tau], method="wiener", options={"k": k},
+            mc = measure_sinusoid_response(fr, [tau], method=CONSTANT_K_METHOD, options={"k": k},
                                            seed=seed + 100 + j, **common)
             blocks.append(_block("monte_carlo", "chain_gain", name, "1", tau_s=tau, k=k,
                                  freq_hz=fr, value=mc["chain_gain"], stderr=mc["chain_gain_se"],
@@ -699,7 +714,7 @@ def fig13_data(*, pairs: Mapping[str, float] = PATENT_PAIRS, k: float = PATENT_K
                              stderr=mc["chain_gain_se"], n_trials=n_trials))
         meta["monte_carlo"] = True
         meta["mc"] = {"dt_s": FUSION_MC_DT_S, "n_samples": FUSION_MC_N, "n_trials": n_trials,
-                      "fusion_method": fusion_method}
+                      "method": CONSTANT_K_METHOD, "fusion_method": fusion_method}
     return FigureData(13, FIGURE_NAMES[13], _concat(blocks), meta)
 
 
@@ -740,7 +755,7 @@ def fig14_data(*, taus_s=FIG14_TAUS_S, degree: int = FIG14_DEGREE,
 # Drawing
 # ---------------------------------------------------------------------------
 
-_MC_NOTE = r"Monte Carlo through restore.integration.integrate (bars: $\pm 2\sigma$)"
+_MC_NOTE = (r"Monte Carlo, integrate(method='%s') ($\pm 2\sigma$ bars)" % CONSTANT_K_METHOD)
 _H = r"$|H_k|$"
 _F = r"$F_k$"
 
@@ -752,6 +767,20 @@ def _curve(data: FigureData, quantity: str, series: str, source: str = "analytic
 
 def _has_mc(data: FigureData, quantity: str) -> bool:
     return bool(np.any((data.table["source"] == "monte_carlo") & (data.table["quantity"] == quantity)))
+
+
+def _note_mc_unavailable(data: FigureData) -> None:
+    """Remember, for the legend, why a figure has no Monte Carlo points."""
+    why = data.meta.get("mc_unavailable")
+    import textwrap
+
+    data.meta["mc_note"] = (textwrap.fill(f"no Monte Carlo points — {why}"[:120], 48)
+                            if why else None)
+
+
+def _legend_note(ax, data: FigureData) -> None:
+    if data.meta.get("mc_note"):
+        ax.plot([], [], " ", label=data.meta["mc_note"])
 
 
 def _blind_legend(tau: float) -> str:
@@ -781,6 +810,7 @@ def draw_fig07(ax, data: FigureData):
     ax.set_ylabel("gain (rad/rad, dimensionless)")
     ax.set_title(rf"Fig. 7 — Wiener estimator gain, $\tau$ = {tau * 1e3:g} ms "
                  rf"($1/\tau$ = {1 / tau:.1f} Hz), $k$ = {k:g}")
+    _legend_note(ax, data)
     P.legend_below(ax, ncols=2)
     return ax.figure
 
@@ -794,9 +824,9 @@ def draw_fig08(ax, data: FigureData):
     v = v.copy()
     v[np.abs(np.diff(v, prepend=v[0])) > 90] = np.nan  # do not draw the ±180° wraps as lines
     ax.plot(f, v, color=c_h,
-            label=rf"estimator phase arg $H_k = -90° - \omega\tau/2$ (mod 180° at $n/\tau$), $k$ = {k:g}")
+            label=rf"estimator: arg $H_k = -90° - 180°\cdot\mathrm{{frac}}(f\tau)$, $k$ = {k:g}")
     f, v, _ = _curve(data, "chain_phase", s)
-    ax.plot(f, v, color=c_f, label=r"chain phase arg $F_k = 0$ (no phase shift)")
+    ax.plot(f, v, color=c_f, label=r"chain: arg $F_k = 0$ (no phase shift)")
     for q, c in (("estimator_phase", c_h), ("chain_phase", c_f)):
         if _has_mc(data, q):
             fm, vm, em = _curve(data, q, s, "monte_carlo")
@@ -809,6 +839,7 @@ def draw_fig08(ax, data: FigureData):
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel("phase (deg)")
     ax.set_title(rf"Fig. 8 — Wiener estimator phase, $\tau$ = {tau * 1e3:g} ms, $k$ = {k:g}")
+    _legend_note(ax, data)
     P.legend_below(ax, ncols=2)
     return ax.figure
 
@@ -831,7 +862,7 @@ def _draw_family(ax, data: FigureData, quantity: str, *, title: str, ylabel: str
             fm, vm, em = _curve(data, quantity, s, "monte_carlo")
             P.plot_mc_points(ax, fm, vm, em, color=c, label=_MC_NOTE if i == len(names) - 1 else None)
         if len(taus) > 1:
-            P.rug_blind_frequencies(ax, tau, f_max_hz=fmax, color=c,
+            P.rug_blind_frequencies(ax, tau, f_max_hz=fmax, color=c, y_axes=0.975 - 0.04 * i,
                                     label=r"blind frequencies $n/\tau$ (triangles, colour of $\tau$)"
                                     if i == len(names) - 1 else None)
     if len(taus) == 1:
@@ -841,6 +872,7 @@ def _draw_family(ax, data: FigureData, quantity: str, *, title: str, ylabel: str
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
+    _legend_note(ax, data)
     P.legend_below(ax, ncols=3 if vary == "k" else 2)
     return ax.figure
 
@@ -871,7 +903,7 @@ def draw_fig11(ax, data: FigureData):
     return _draw_family(ax, data, "estimator_gain", vary="tau",
                         ylabel=rf"estimator gain {_H} (rad/rad)",
                         title=rf"Fig. 11 — effect of $\tau$ on the estimator gain {_H}, $k$ = {k:g}",
-                        ylim=(0, 1.75))
+                        ylim=(0, 1.95))
 
 
 def draw_fig12(ax, data: FigureData):
@@ -880,7 +912,7 @@ def draw_fig12(ax, data: FigureData):
     return _draw_family(ax, data, "chain_gain", vary="tau",
                         ylabel=rf"chain gain {_F} $= \hat\theta/\theta$ (rad/rad)",
                         title=rf"Fig. 12 — effect of $\tau$ on the chain gain {_F}, $k$ = {k:g}",
-                        ylim=(0, 1.1))
+                        ylim=(0, 1.2))
 
 
 def draw_fig13(axes, data: FigureData):
@@ -900,7 +932,8 @@ def draw_fig13(axes, data: FigureData):
         if _has_mc(data, "chain_gain"):
             fm, vm, em = _curve(data, "chain_gain", name, "monte_carlo")
             P.plot_mc_points(ax, fm, vm, em, color="k",
-                             label="Monte Carlo, integrate(method='wiener')\n(bars: ±2σ)")
+                             label=f"Monte Carlo, integrate(method='{CONSTANT_K_METHOD}')\n(bars: ±2σ)"
+                             if i == 0 else None)
         P.rug_blind_frequencies(ax, tau, f_max_hz=f_hi, f_min_hz=f_lo, color=c, size=4,
                                 label=rf"blind $n/\tau$ ($n \times$ {1 / tau:.2f} Hz)")
         ax.set_ylim(0, 1.1)
@@ -915,12 +948,13 @@ def draw_fig13(axes, data: FigureData):
             label="joint Wiener, all pairs:\n" + r"$\Sigma_j|G_j|^2 / (\Sigma_j|G_j|^2 + k)$, " + f"$k$ = {k:g}")
     if _has_mc(data, "joint_chain_gain"):
         fm, vm, em = _curve(data, "joint_chain_gain", "joint Wiener, all pairs", "monte_carlo")
-        meth = data.meta.get("mc", {}).get("fusion_method", "fusion")
+        meth = data.meta.get("mc", {}).get("fusion_method", CONSTANT_K_METHOD)
         P.plot_mc_points(ax, fm, vm, em, color=P.SERIES_COLORS[1],
                          label=f"Monte Carlo, integrate(method='{meth}')\n(bars: ±2σ)")
     ax.set_ylim(0, 1.1)
     ax.set_yticks([0, 0.25, 0.5, 0.75, 1])
     ax.set_ylabel("combined chain gain\n(rad/rad)")
+    _legend_note(ax, data)
     P.legend_right(ax, fontsize=8)
     ax.set_xscale("log")
     ax.set_xlim(f_lo, f_hi)
@@ -960,9 +994,10 @@ def draw_fig14(ax, data: FigureData):
     ax.set_ylim(0.05, 300)
     ax.set_xlabel(r"delay $\tau$ between the two acquisitions (s)")
     ax.set_ylabel(r"gain $\sigma_{est}/\sigma_{meas}$ (dimensionless)")
-    ax.set_title(f"Fig. 14 — least-squares polynomial estimator (degree {m['degree']}, θ0 unobservable): "
+    ax.set_title(f"Fig. 14 — least-squares polynomial estimator (degree {m['degree']}, $\\theta_0$ unobservable): "
                  f"{m['line_period_s'] * 1e3:g} ms lines,\n1 independent measurement every "
                  f"{m['lines_per_measurement']} lines, {m['n_lines']} lines ({dur:g} s)", fontsize=10.5)
+    _legend_note(ax, data)
     P.legend_below(ax, ncols=2, fontsize=8)
     return ax.figure
 
@@ -971,11 +1006,28 @@ def draw_fig14(ax, data: FigureData):
 # Top level
 # ---------------------------------------------------------------------------
 
-def _integrate_available() -> str | None:
+def method_unavailable(method: str, integrate: Callable | None = None, **options) -> str | None:
+    """Why ``integrate(method=method)`` cannot be used for Monte Carlo, or None if it can.
+
+    Probes the method on a tiny gap-free record.  Missing package/module or an
+    unknown method name count as unavailable; any other error propagates (it is
+    a bug to see, not to hide).
+    """
     try:
-        _get_integrate()
-    except Exception as exc:  # ImportError or a half-written module
-        return f"{type(exc).__name__}: {exc}"
+        integrate = integrate or _get_integrate()
+    except Exception as exc:  # ImportError or a half-written package
+        return f"restore.integration not importable ({type(exc).__name__}: {exc})"
+    dt, tau, n = 1e-3, 5e-3, 400
+    t = np.arange(n) * dt
+    d = np.sin(2 * np.pi * 3.0 * (t + tau)) - np.sin(2 * np.pi * 3.0 * t)
+    try:
+        integrate([d], [tau], dt, method=method, **options)
+    except (ImportError, NotImplementedError) as exc:
+        return f"integrate(method={method!r}): {type(exc).__name__}: {exc}"
+    except ValueError as exc:
+        if "method" in str(exc).split(":")[0]:
+            return f"integrate(method={method!r}): {exc}"
+        raise
     return None
 
 
@@ -988,8 +1040,9 @@ def make_patent_figures(out_dir, *, monte_carlo: bool = True, seed: int = 0) -> 
         Output folder (created if needed).  Files are written atomically.
     monte_carlo : bool
         Add points measured through :func:`restore.integration.integrate`.  If the
-        package cannot be imported, a warning is issued and the figures are drawn
-        without them.
+        package or a method cannot be used (see :func:`method_unavailable`), a
+        ``RuntimeWarning`` is issued and the figures concerned are drawn without
+        them, with a note saying why.
     seed : int
         Seed of every Monte Carlo draw.
 
@@ -1000,26 +1053,31 @@ def make_patent_figures(out_dir, *, monte_carlo: bool = True, seed: int = 0) -> 
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    why_k = why_poly = None
     if monte_carlo:
-        why = _integrate_available()
-        if why:
-            warnings.warn(f"restore.integration unavailable ({why}); figures drawn without "
-                          "Monte Carlo points", RuntimeWarning, stacklevel=2)
-            monte_carlo = False
+        why_k = method_unavailable(CONSTANT_K_METHOD, k=PATENT_K)
+        why_poly = method_unavailable("polynomial", degree=FIG14_DEGREE)
+        for why in {why_k, why_poly} - {None}:
+            warnings.warn(f"{why}; figures drawn without these Monte Carlo points",
+                          RuntimeWarning, stacklevel=2)
     cache: dict = {}
-    kw = dict(monte_carlo=monte_carlo, seed=seed)
+    kk = dict(monte_carlo=monte_carlo and why_k is None, seed=seed)
+    kp = dict(monte_carlo=monte_carlo and why_poly is None, seed=seed)
     datas = [
-        (fig07_data(mc_cache=cache, **kw), draw_fig07),
-        (fig08_data(mc_cache=cache, **kw), draw_fig08),
-        (fig09_data(mc_cache=cache, **kw), draw_fig09),
-        (fig10_data(mc_cache=cache, **kw), draw_fig10),
-        (fig11_data(mc_cache=cache, **kw), draw_fig11),
-        (fig12_data(mc_cache=cache, **kw), draw_fig12),
-        (fig13_data(**kw), draw_fig13),
-        (fig14_data(**kw), draw_fig14),
+        (fig07_data(mc_cache=cache, **kk), draw_fig07, why_k),
+        (fig08_data(mc_cache=cache, **kk), draw_fig08, why_k),
+        (fig09_data(mc_cache=cache, **kk), draw_fig09, why_k),
+        (fig10_data(mc_cache=cache, **kk), draw_fig10, why_k),
+        (fig11_data(mc_cache=cache, **kk), draw_fig11, why_k),
+        (fig12_data(mc_cache=cache, **kk), draw_fig12, why_k),
+        (fig13_data(**kk), draw_fig13, why_k),
+        (fig14_data(**kp), draw_fig14, why_poly),
     ]
     written: list[Path] = []
-    for data, draw in datas:
+    for data, draw, why in datas:
+        if why:
+            data.meta["mc_unavailable"] = why
+        _note_mc_unavailable(data)
         if data.number == 13:
             fig, axes = P.new_axes_grid(len(data.meta["pairs"]) + 1, figsize=(11.0, 10.0),
                                         height_ratios=[1, 1, 1, 1, 1.5])

@@ -154,9 +154,14 @@ def rug_blind_frequencies(ax: Axes, tau_s: float, *, f_max_hz: float, f_min_hz: 
 
 
 def legend_below(ax: Axes, *, ncols: int = 2, **kwargs):
-    """Legend centred under the axes (outside the data area, so it hides nothing)."""
-    return ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncols=ncols,
-                     frameon=False, **kwargs)
+    """Figure legend under the axes (outside the data area, so it hides nothing).
+
+    Uses the figure's constrained layout (``loc="outside lower center"``), which
+    reserves the room the legend needs.
+    """
+    handles, labels = ax.get_legend_handles_labels()
+    return ax.figure.legend(handles, labels, loc="outside lower center", ncols=ncols,
+                            frameon=False, **kwargs)
 
 
 def legend_right(ax: Axes, **kwargs):

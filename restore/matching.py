@@ -56,6 +56,8 @@ __all__ = [
 
 _METHODS = ("ncc", "phase")
 _CHUNK = 4096  # points per batch: bounds memory, not a per-point loop
+#: antisymmetric gradient filter of the A window (Gauss-Newton Jacobian), 1/px
+_GRADIENT = np.array([1.0, -8.0, 0.0, 8.0, -1.0]) / 12.0
 
 
 class MatchFlag(enum.IntFlag):
@@ -195,14 +197,10 @@ def resample_windows(patches: np.ndarray, shift_lines, shift_cols, *, order: int
         raise ValueError(f"patches: need more than {m} lines and columns, got {patches.shape}")
     wl = lanczos_weights(shift_lines, order=order).astype(patches.dtype, copy=False)
     wc = lanczos_weights(shift_cols, order=order).astype(patches.dtype, copy=False)
+    swv = np.lib.stride_tricks.sliding_window_view
     # lines first: (N, h, wp) is small for wide, short windows
-    rows = wl[:, 0, None, None] * patches[:, 0:h, :]
-    for k in range(1, m + 1):
-        rows += wl[:, k, None, None] * patches[:, k:k + h, :]
-    out = wc[:, 0, None, None] * rows[:, :, 0:w]
-    for k in range(1, m + 1):
-        out += wc[:, k, None, None] * rows[:, :, k:k + w]
-    return out
+    rows = np.einsum("nk,nkij->nij", wl, swv(patches, h, axis=1).transpose(0, 1, 3, 2))
+    return np.einsum("nk,nijk->nij", wc, swv(rows, m + 1, axis=2))
 
 
 # ---------------------------------------------------------------------------
@@ -253,77 +251,96 @@ def _check_search(search) -> tuple[int, int]:
 
 
 def _gather(image: np.ndarray, l0: np.ndarray, c0: np.ndarray, half_l: int, half_c: int):
-    """(N, 2*half_l+1, 2*half_c+1) patches centred on integer (l0, c0); out-of-image is clipped."""
+    """Patches ``(N, 2*half_l+1, 2*half_c+1)`` centred on integer ``(l0, c0)``.
+
+    Patches that would leave the image are shifted inside it (their content is
+    then meaningless) and reported by the returned ``inside`` mask.
+    """
     nl, nc = image.shape
-    dl = np.arange(-half_l, half_l + 1)
-    dc = np.arange(-half_c, half_c + 1)
-    inside = (l0 - half_l >= 0) & (l0 + half_l < nl) & (c0 - half_c >= 0) & (c0 + half_c < nc)
-    rows = np.clip(l0[:, None] + dl, 0, nl - 1)
-    cols = np.clip(c0[:, None] + dc, 0, nc - 1)
-    return image[rows[:, :, None], cols[:, None, :]], inside
+    hl, hc = 2 * half_l + 1, 2 * half_c + 1
+    if nl < hl or nc < hc:
+        return np.zeros((l0.size, hl, hc)), np.zeros(l0.size, dtype=bool)
+    s_l, s_c = l0 - half_l, c0 - half_c
+    inside = (s_l >= 0) & (s_l + hl <= nl) & (s_c >= 0) & (s_c + hc <= nc)
+    view = np.lib.stride_tricks.sliding_window_view(image, (hl, hc))
+    return view[np.clip(s_l, 0, nl - hl), np.clip(s_c, 0, nc - hc)], inside
 
 
-def _normalise(win: np.ndarray):
-    """Zero-mean windows and their L2 norms."""
-    z = win - win.mean(axis=(1, 2), keepdims=True)
-    return z, np.sqrt(np.einsum("nij,nij->n", z, z))
-
-
-def _ncc(a_z: np.ndarray, a_norm: np.ndarray, b: np.ndarray) -> np.ndarray:
-    b_z, b_norm = _normalise(b)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.einsum("nij,nij->n", a_z, b_z) / (a_norm * b_norm)
+def _box_sums(region: np.ndarray, h: int, w: int) -> np.ndarray:
+    """Sums over every ``(h, w)`` window of a stack: (N, L - h + 1, C - w + 1)."""
+    nr = region.shape[1] - h + 1
+    rows = region[:, 0:nr, :].copy()
+    for p in range(1, h):
+        rows += region[:, p:p + nr, :]
+    cs = np.cumsum(rows, axis=2, dtype=np.float64)
+    out = cs[:, :, w - 1:].copy()
+    out[:, :, 1:] -= cs[:, :, :-w]
+    return out
 
 
 def _integer_search(a_z, a_norm, region, h, w, sl, sc):
-    """NCC over the integer search grid: (N, 2sl+1, 2sc+1)."""
+    """NCC of the A windows over the integer search grid: (N, 2sl+1, 2sc+1).
+
+    A loop over the handful of integer offsets; each step is batched over the
+    points. Non-computable entries (flat B) are ``-inf``.
+    """
     n = a_z.shape[0]
-    npx = h * w
-    view = np.lib.stride_tricks.sliding_window_view(region, (h, w), axis=(1, 2))
-    # (N, 2sl+1, 2sc+1, h, w) -> (N, K, h*w) (one copy of K windows per point)
-    mat = view.reshape(n, (2 * sl + 1) * (2 * sc + 1), npx)
-    num = np.matmul(mat, a_z.reshape(n, npx, 1))[..., 0]
-    s1 = mat.sum(axis=2)
-    s2 = np.einsum("nkp,nkp->nk", mat, mat)
-    var = np.maximum(s2 - s1 * s1 / npx, 0.0)
+    num = np.empty((n, 2 * sl + 1, 2 * sc + 1), dtype=np.float64)
+    for i in range(2 * sl + 1):
+        for j in range(2 * sc + 1):
+            num[:, i, j] = np.einsum("nij,nij->n", a_z, region[:, i:i + h, j:j + w])
+    s1 = _box_sums(region, h, w)
+    s2 = _box_sums(region * region, h, w)
+    var = np.maximum(s2 - s1 * s1 / (h * w), 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        surf = num / (np.sqrt(var) * a_norm[:, None])
-    surf = np.where(np.isfinite(surf), surf, -np.inf)
-    return surf.reshape(n, 2 * sl + 1, 2 * sc + 1)
+        surf = num / (np.sqrt(var) * a_norm[:, None, None])
+    return np.where(np.isfinite(surf), surf, -np.inf)
 
 
-def _parabola(minus, centre, plus):
-    den = minus - 2.0 * centre + plus
+def _inv3(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of a stack of symmetric 3x3 matrices and their determinants."""
+    a, b, c = m[:, 0, 0], m[:, 0, 1], m[:, 0, 2]
+    d, e, f = m[:, 1, 1], m[:, 1, 2], m[:, 2, 2]
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    inv = np.stack([c00, c01, c02, c01, c11, c12, c02, c12, c22], axis=1).reshape(-1, 3, 3)
     with np.errstate(divide="ignore", invalid="ignore"):
-        d = np.where(den < 0, 0.5 * (minus - plus) / den, 0.0)
-    return np.clip(np.nan_to_num(d), -0.5, 0.5)
+        return inv / det[:, None, None], det
 
 
-def _phase_step(a_z: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Residual shift of ``b`` w.r.t. ``a`` by a weighted phase-plane fit (px)."""
-    h, w = a_z.shape[1:]
-    fa = np.fft.rfft2(a_z)
-    fb = np.fft.rfft2(b - b.mean(axis=(1, 2), keepdims=True))
-    q = fb * np.conj(fa)  # b(x) = a(x - s)  =>  phase = -2 pi f.s
-    wgt = np.abs(q)
-    phi = np.angle(q)
+def _phase_grids(h: int, w: int):
+    """Frequencies (cycles/px) of the rfft2 half plane and its multiplicity."""
     u = np.fft.fftfreq(h)[:, None] * np.ones((1, w // 2 + 1))
     v = np.fft.rfftfreq(w)[None, :] * np.ones((h, 1))
-    # conjugate-symmetric half plane: the v = 0 column holds u and -u twice,
-    # the others stand for their mirror too -> weight 2 except v = 0
-    half = np.where(v == 0, 1.0, 2.0)
-    wgt = wgt * half
+    # the half plane stands for its mirror too, except the v = 0 column
+    # (and the Nyquist column of an even width)
+    mult = np.where((v == 0) | ((w % 2 == 0) & (v == 0.5)), 1.0, 2.0)
+    return u, v, mult
+
+
+def _phase_shift(fa: np.ndarray, b: np.ndarray, grids):
+    """Shift of ``b`` w.r.t. the A window (spectrum ``fa``) from the phase plane (px).
+
+    Weighted least-squares fit through the origin of the cross-power-spectrum
+    phase, ``phase(F_b conj(F_a)) = -2 pi (u s_l + v s_c)``, weights ``|F_b F_a|``
+    (Kim & Su 1993). Valid for small residual shifts (no phase wrapping),
+    which the iteration provides.
+    """
+    u, v, mult = grids
+    q = np.fft.rfft2(b) * np.conj(fa)
+    wgt = np.abs(q) * mult
+    wphi = wgt * np.angle(q)
     uu = np.einsum("nij,ij->n", wgt, u * u)
     vv = np.einsum("nij,ij->n", wgt, v * v)
     uv = np.einsum("nij,ij->n", wgt, u * v)
-    pu = np.einsum("nij,ij->n", wgt * phi, u)
-    pv = np.einsum("nij,ij->n", wgt * phi, v)
+    pu = np.einsum("nij,ij->n", wphi, u)
+    pv = np.einsum("nij,ij->n", wphi, v)
     det = uu * vv - uv * uv
     with np.errstate(divide="ignore", invalid="ignore"):
-        sl = (vv * pu - uv * pv) / det
-        sc = (uu * pv - uv * pu) / det
-    k = -1.0 / (2.0 * np.pi)
-    return np.nan_to_num(k * sl), np.nan_to_num(k * sc)
+        s_l = -(vv * pu - uv * pv) / (2.0 * np.pi * det)
+        s_c = -(uu * pv - uv * pu) / (2.0 * np.pi * det)
+    return np.nan_to_num(s_l), np.nan_to_num(s_c)
 
 
 # ---------------------------------------------------------------------------
@@ -344,8 +361,8 @@ def match_points(
     min_quality: float = 0.5,
     max_std: float | None = None,
     order: int = 4,
-    max_iter: int = 10,
-    tol: float = 1e-4,
+    max_iter: int = 8,
+    tol: float = 1e-3,
 ) -> MatchResult:
     """Match points of band A in band B to sub-pixel accuracy.
 
@@ -355,7 +372,8 @@ def match_points(
         The two bands (any radiometric unit; gain and offset between them are
         estimated per window). Non-finite pixels are no data.
     lines_a, cols_a : array_like of float, shape (N,)
-        Points in A (px). The A window is centred on the rounded point.
+        Points in A (px). The A window is centred on the rounded point; the
+        match is reported for the point itself (local translation).
     pred_lines_b, pred_cols_b : array_like of float, shape (N,)
         Predicted position of each point in B (px, fractional).
     window : (int, int), keyword-only
@@ -365,7 +383,7 @@ def match_points(
         columns), px; size it by the predictor's accuracy.
     method : {"ncc", "phase"}, keyword-only
         Sub-pixel estimator (see the module docstring). Both start from the
-        integer NCC peak.
+        peak of the normalised cross-correlation over the integer grid.
     min_quality : float, keyword-only
         Matches whose final NCC is below this are flagged ``LOW_CORRELATION``.
     max_std : float or None, keyword-only
@@ -373,11 +391,12 @@ def match_points(
         on either axis are flagged ``IMPRECISE``.
     order : int, keyword-only
         Lanczos order of the interpolator of B (reads ``order`` more pixels of
-        B on each side).
+        B on each side of the search area).
     max_iter : int, keyword-only
         Maximum number of sub-pixel iterations.
     tol : float, keyword-only
-        Convergence threshold on the update (px).
+        A point stops iterating once its update is below this (px); the last
+        update is applied, so the remaining error is much smaller.
 
     Returns
     -------
@@ -389,6 +408,12 @@ def match_points(
     ------
     ValueError
         On a bad parameter; the message names it.
+
+    Notes
+    -----
+    A match is flagged ``SEARCH_BORDER`` when it is not bracketed by the
+    searched integer grid (beyond its outermost offsets; beyond ±0.5 px on an
+    axis whose half-range is 0).
     """
     if method not in _METHODS:
         raise ValueError(f"method: expected one of {_METHODS}, got {method!r}")
@@ -409,8 +434,8 @@ def match_points(
     for name, img in (("image_a", image_a), ("image_b", image_b)):
         if img.ndim != 2:
             raise ValueError(f"{name}: expected a 2-D (line, column) array, got shape {img.shape}")
-    pts = [np.atleast_1d(np.asarray(v, dtype=float)) for v in (lines_a, cols_a, pred_lines_b, pred_cols_b)]
     names = ("lines_a", "cols_a", "pred_lines_b", "pred_cols_b")
+    pts = [np.atleast_1d(np.asarray(v, dtype=float)) for v in (lines_a, cols_a, pred_lines_b, pred_cols_b)]
     n = pts[0].shape[0]
     for name, v in zip(names, pts):
         if v.ndim != 1 or v.shape[0] != n:
@@ -418,12 +443,12 @@ def match_points(
         if not np.all(np.isfinite(v)):
             raise ValueError(f"{name}: must be finite")
 
-    parts = [
-        _match_chunk(image_a, image_b, *(v[i:i + _CHUNK] for v in pts), h=h, w=w, sl=sl, sc=sc,
-                     method=method, min_quality=float(min_quality), max_std=max_std, order=int(order),
-                     max_iter=int(max_iter), tol=float(tol))
-        for i in range(0, max(n, 1), _CHUNK)
-    ]
+    opts = dict(h=h, w=w, sl=sl, sc=sc, method=method, min_quality=float(min_quality),
+                max_std=max_std, order=int(order), max_iter=int(max_iter), tol=float(tol))
+    parts = [_match_chunk(image_a, image_b, *(v[i:i + _CHUNK] for v in pts), **opts)
+             for i in range(0, n, _CHUNK)]
+    if not parts:
+        parts = [_match_chunk(image_a, image_b, *pts, **opts)]
     fields = MatchResult.__dataclass_fields__
     return MatchResult(**{f: np.concatenate([p[f] for p in parts]) for f in fields})
 
@@ -431,119 +456,138 @@ def match_points(
 def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_quality, max_std,
                  order, max_iter, tol) -> dict:
     n = la.shape[0]
+    npx = h * w
     hl, hc = h // 2, w // 2
-    g = order - 1
+    dfil = _GRADIENT.astype(np.float32)
+    g = dfil.size // 2
     flags = np.zeros(n, dtype=np.int64)
+    ftype = np.float32
 
     ra_l, ra_c = np.rint(la).astype(np.int64), np.rint(ca).astype(np.int64)
     # prediction for the rounded A point (local translation model)
     pr_l, pr_c = pl - (la - ra_l), pc - (ca - ra_c)
     c0_l, c0_c = np.rint(pr_l).astype(np.int64), np.rint(pr_c).astype(np.int64)
 
-    # --- A: window and its gradient ------------------------------------------------
+    # --- gather A (window + gradient support) and B (search + interpolation) ------
     a_patch, in_a = _gather(image_a, ra_l, ra_c, hl + g, hc + g)
-    # --- B: everything the search and the refinement can read ---------------------
     b_big, in_b = _gather(image_b, c0_l, c0_c, hl + sl + order, hc + sc + order)
     flags[~(in_a & in_b)] |= MatchFlag.OUT_OF_BOUNDS
-    bad = ~(np.isfinite(a_patch).all(axis=(1, 2)) & np.isfinite(b_big).all(axis=(1, 2)))
-    flags[bad] |= MatchFlag.NO_DATA
-    a_patch = np.where(np.isfinite(a_patch), a_patch, 0.0)
-    b_big = np.where(np.isfinite(b_big), b_big, 0.0)
-
+    ok_a = np.isfinite(a_patch).all(axis=(1, 2))
+    ok_b = np.isfinite(b_big).all(axis=(1, 2))
+    flags[~(ok_a & ok_b)] |= MatchFlag.NO_DATA
+    if not (ok_a.all() and ok_b.all()):
+        a_patch = np.where(np.isfinite(a_patch), a_patch, 0.0)
+        b_big = np.where(np.isfinite(b_big), b_big, 0.0)
+    # remove a per-point level, then work in single precision
+    a_ref = a_patch[:, g:g + h, g:g + w].mean(axis=(1, 2))
+    b_ref = b_big.mean(axis=(1, 2))
+    a_patch = a_patch.astype(ftype)
+    a_patch -= a_ref.astype(ftype)[:, None, None]
+    b_big = b_big.astype(ftype)
+    b_big -= b_ref.astype(ftype)[:, None, None]
     a_win = a_patch[:, g:g + h, g:g + w]
-    a_z, a_norm = _normalise(a_win)
-    scale = np.abs(a_win).max(axis=(1, 2)) + np.abs(b_big).max(axis=(1, 2)) + 1e-300
-    flat_a = a_norm <= 1e-9 * scale * np.sqrt(h * w)
+    a_z = a_win - a_win.mean(axis=(1, 2), keepdims=True)
+    a_norm2 = np.einsum("nij,nij->n", a_z, a_z, dtype=np.float64)
+    a_norm = np.sqrt(a_norm2)
+    # flat: no texture at all, or below single precision w.r.t. the level
+    flat_a = ~(a_norm > 1e-6 * np.sqrt(npx) * np.abs(a_ref))
 
-    # --- integer search ----------------------------------------------------------
+    # --- integer search ------------------------------------------------------------
     region = b_big[:, order:order + h + 2 * sl, order:order + w + 2 * sc]
     surf = _integer_search(a_z, a_norm, region, h, w, sl, sc)
     k = np.argmax(surf.reshape(n, -1), axis=1)
     il, ic = np.divmod(k, 2 * sc + 1)
-    peak = surf.reshape(n, -1)[np.arange(n), k]
-    flat_b = ~np.isfinite(peak)
-    # initial sub-pixel guess: parabola through the peak on each axis
-    idx = np.arange(n)
+    flat_b = ~np.isfinite(surf.reshape(n, -1)[np.arange(n), k])
+    # B patch centred on the integer peak, with the interpolation support
+    hp, wp = h + 2 * order, w + 2 * order
+    patch = np.lib.stride_tricks.sliding_window_view(b_big, (hp, wp), axis=(1, 2))[np.arange(n), il, ic]
+
+    # --- Gauss-Newton design: zero-mean [A, dA/dl, dA/dc] (fixed) -------------------
+    swv = np.lib.stride_tricks.sliding_window_view
+    g_l = np.einsum("k,nijk->nij", dfil, swv(a_patch[:, :, g:g + w], 2 * g + 1, axis=1))
+    g_c = np.einsum("k,nijk->nij", dfil, swv(a_patch[:, g:g + h, :], 2 * g + 1, axis=2))
+    jac = np.stack([a_z, g_l - g_l.mean(axis=(1, 2), keepdims=True),
+                    g_c - g_c.mean(axis=(1, 2), keepdims=True)], axis=1).reshape(n, 3, npx)
+    normal = np.einsum("nqp,nrp->nqr", jac, jac, dtype=np.float64)
+    dsc = np.sqrt(np.einsum("nii->ni", normal))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        det_corr = _inv3(normal / (dsc[:, :, None] * dsc[:, None, :]))[1]
+    singular = ~(det_corr > 1e-6) | flat_a | flat_b
+    normal[singular] = np.eye(3)
+    ninv = _inv3(normal)[0]
+
+    # --- sub-pixel iterations (active set shrinks as points converge) ---------------
     d_l = np.zeros(n)
     d_c = np.zeros(n)
-    if sl > 0:
-        inner = (il > 0) & (il < 2 * sl)
-        m, p = np.clip(il - 1, 0, 2 * sl), np.clip(il + 1, 0, 2 * sl)
-        d_l = np.where(inner, _parabola(surf[idx, m, ic], surf[idx, il, ic], surf[idx, p, ic]), 0.0)
-    if sc > 0:
-        inner = (ic > 0) & (ic < 2 * sc)
-        m, p = np.clip(ic - 1, 0, 2 * sc), np.clip(ic + 1, 0, 2 * sc)
-        d_c = np.where(inner, _parabola(surf[idx, il, m], surf[idx, il, ic], surf[idx, il, p]), 0.0)
-    d_l = np.nan_to_num(d_l)
-    d_c = np.nan_to_num(d_c)
-
-    # patch of B centred on the integer peak, with the interpolation support
-    hp, wp = h + 2 * order, w + 2 * order
-    rows = il[:, None] + np.arange(hp)
-    cols = ic[:, None] + np.arange(wp)
-    patch = b_big[idx[:, None, None], rows[:, :, None], cols[:, None, :]]
-
-    # --- design matrix of the Gauss-Newton fit (fixed: gradient of A) ------------
-    dfil = derivative_filter(order=order)
-    g_l = np.zeros_like(a_win)
-    g_c = np.zeros_like(a_win)
-    for j, dk in enumerate(dfil):
-        if dk != 0.0:
-            g_l += dk * a_patch[:, j:j + h, g:g + w]
-            g_c += dk * a_patch[:, g:g + h, j:j + w]
-    jac = np.stack([a_z, np.ones_like(a_z), g_l, g_c], axis=-1).reshape(n, h * w, 4)
-    normal = np.einsum("npi,npj->nij", jac, jac)
-    dscale = np.sqrt(np.einsum("nii->ni", normal)) + 1e-300
-    corr = normal / (dscale[:, :, None] * dscale[:, None, :])
-    eig_min = np.linalg.eigvalsh(corr)[:, 0]
-    singular = ~(eig_min > 1e-8) | flat_a | flat_b
-    corr = np.where(singular[:, None, None], np.eye(4), corr)
-    ninv = np.linalg.inv(corr) / (dscale[:, :, None] * dscale[:, None, :])
-
-    def fit_photometry(b):
-        gain = np.einsum("nij,nij->n", a_z, b) / np.where(flat_a, 1.0, a_norm**2)
-        return gain, b.mean(axis=(1, 2))
-
-    converged = np.zeros(n, dtype=bool)
-    b_res = resample_windows(patch, d_l, d_c, order=order)
-    gain, offset = fit_photometry(b_res)
-    for _ in range(max_iter):
-        if method == "ncc":
-            r = (b_res - gain[:, None, None] * a_z - offset[:, None, None]).reshape(n, h * w)
-            p = -np.einsum("nij,nj->ni", ninv, np.einsum("npi,np->ni", jac, r))
-            safe = np.where(np.abs(gain) > 1e-12, gain, 1.0)
-            step_l, step_c = p[:, 2] / safe, p[:, 3] / safe
-            gain, offset = gain - p[:, 0], offset - p[:, 1]
-        else:
-            step_l, step_c = _phase_step(a_z, b_res)
-        step_l = np.where(singular, 0.0, step_l)
-        step_c = np.where(singular, 0.0, step_c)
-        d_l = np.clip(d_l + step_l, -0.999, 0.999)
-        d_c = np.clip(d_c + step_c, -0.999, 0.999)
-        converged = (np.abs(step_l) < tol) & (np.abs(step_c) < tol)
-        b_res = resample_windows(patch, d_l, d_c, order=order)
-        if method == "phase":
-            gain, offset = fit_photometry(b_res)
-        if converged.all():
+    stats = np.zeros((n, 4))  # <J_q, B~> (q = 0..2) and |B~ - mean|^2 at the last evaluation
+    converged = singular.copy()
+    kappa = np.ones((n, 2))  # secant estimate of the gain of the step
+    prev = np.zeros((n, 4))  # previous (d_l, d_c, F_l, F_c)
+    if method == "phase":
+        fa = np.fft.rfft2(a_z)
+        grids = _phase_grids(h, w)
+    active = np.flatnonzero(~converged)
+    for it in range(max_iter + 1):
+        if active.size == 0:
             break
+        if it == 0:  # at the integer peak: no resampling needed
+            b_res = patch[active, order:order + h, order:order + w]
+        else:
+            b_res = resample_windows(patch[active], d_l[active], d_c[active], order=order)
+        c = np.einsum("nqp,np->nq", jac[active], b_res.reshape(-1, npx), dtype=np.float64)
+        b_mean = b_res.mean(axis=(1, 2), dtype=np.float64)
+        sb = np.einsum("np,np->n", b_res.reshape(-1, npx), b_res.reshape(-1, npx),
+                       dtype=np.float64) - npx * b_mean**2
+        stats[active] = np.column_stack([c, sb])
+        if it == max_iter:
+            break
+        if method == "ncc" or it == 0:
+            gain = c[:, 0] / a_norm2[active]  # variable projection of the gain
+            p = -np.einsum("nij,nj->ni", ninv[active], c - gain[:, None] * normal[active, :, 0])
+            safe = np.where(np.abs(gain) > 1e-12, gain, 1.0)
+            f_l, f_c = p[:, 1] / safe, p[:, 2] / safe
+        if method == "phase":
+            # the first move is the Lucas-Kanade step; the phase estimate at the
+            # integer peak only seeds the secant
+            ph_l, ph_c = _phase_shift(fa[active], b_res - b_mean[:, None, None].astype(ftype), grids)
+            if it > 0:
+                f_l, f_c = ph_l, ph_c
+        else:
+            ph_l, ph_c = f_l, f_c
+        # both estimators return a residual shift F(d) with the same root but a
+        # slope that is not exactly -1: per-axis secant update of that slope
+        if it > 0:
+            for ax, (dd, ff) in enumerate(((d_l, f_l), (d_c, f_c))):
+                dx = dd[active] - prev[active, ax]
+                df = prev[active, 2 + ax] - ff
+                upd = np.abs(dx) > 1e-4
+                kappa[active, ax] = np.where(upd, np.clip(df / np.where(upd, dx, 1.0), 0.2, 2.0),
+                                             kappa[active, ax])
+        prev[active] = np.column_stack([d_l[active], d_c[active], ph_l, ph_c])
+        step_l, step_c = f_l / kappa[active, 0], f_c / kappa[active, 1]
+        d_l[active] = np.clip(d_l[active] + step_l, -0.999, 0.999)
+        d_c[active] = np.clip(d_c[active] + step_c, -0.999, 0.999)
+        done = (np.abs(step_l) < tol) & (np.abs(step_c) < tol)
+        converged[active[done]] = True
+        active = active[~done]
 
     # --- quality and a-posteriori precision ---------------------------------------
-    quality = _ncc(a_z, a_norm, b_res)
-    gain, offset = fit_photometry(b_res)
-    r = (b_res - gain[:, None, None] * a_z - offset[:, None, None]).reshape(n, h * w)
-    dof = max(h * w - 4, 1)
-    sigma2 = np.einsum("np,np->n", r, r) / dof
+    c0, sb = stats[:, 0], stats[:, 3]
     with np.errstate(divide="ignore", invalid="ignore"):
-        std_l = np.sqrt(sigma2 * ninv[:, 2, 2]) / np.abs(gain)
-        std_c = np.sqrt(sigma2 * ninv[:, 3, 3]) / np.abs(gain)
+        quality = c0 / (a_norm * np.sqrt(sb))
+        gain = c0 / a_norm2
+        sigma2 = np.maximum(sb - c0 * gain, 0.0) / max(npx - 4, 1)
+        std_l = np.sqrt(sigma2 * ninv[:, 1, 1]) / np.abs(gain)
+        std_c = np.sqrt(sigma2 * ninv[:, 2, 2]) / np.abs(gain)
 
-    line_b = c0_l + (il - sl) + d_l + (la - ra_l)
-    col_b = c0_c + (ic - sc) + d_c + (ca - ra_c)
-    off_l = c0_l + (il - sl) + d_l - pr_l
-    off_c = c0_c + (ic - sc) + d_c - pr_c
+    off_l = (il - sl) + d_l
+    off_c = (ic - sc) + d_c
+    line_b = c0_l + off_l + (la - ra_l)
+    col_b = c0_c + off_c + (ca - ra_c)
 
     flags[singular] |= MatchFlag.FLAT
-    flags[(np.abs(off_l) > sl) | (np.abs(off_c) > sc)] |= MatchFlag.SEARCH_BORDER
+    lim_l, lim_c = (sl if sl else 0.5), (sc if sc else 0.5)
+    flags[(np.abs(off_l) > lim_l) | (np.abs(off_c) > lim_c)] |= MatchFlag.SEARCH_BORDER
     flags[~converged | (np.abs(d_l) >= 0.99) | (np.abs(d_c) >= 0.99)] |= MatchFlag.NOT_CONVERGED
     flags[~(quality >= min_quality)] |= MatchFlag.LOW_CORRELATION
     if max_std is not None:

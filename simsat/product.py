@@ -34,10 +34,24 @@ class ProductError(ValueError):
 NETCDF_ENCODING = {"zlib": True, "complevel": 4, "shuffle": True}
 
 
+def _umask() -> int:
+    m = os.umask(0)
+    os.umask(m)
+    return m
+
+
 def _tmp_path(path: Path) -> Path:
     fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
     os.close(fd)
+    os.chmod(name, 0o666 & ~_umask())  # mkstemp's 0600 would survive the rename
     return Path(name)
+
+
+def make_tmp_dir(final: Path) -> Path:
+    """A temporary sibling directory of ``final`` with normal permissions."""
+    d = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".part", dir=final.parent))
+    os.chmod(d, 0o777 & ~_umask())
+    return d
 
 
 def atomic_write_dataset(ds, path: str | Path, *, compress: bool = True) -> Path:

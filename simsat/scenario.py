@@ -110,13 +110,13 @@ class Scenario:
                                       x_range_m=self.x_range_m, y_range_m=self.y_range_m)
         _check_coverage(dem, self.x_range_m, self.y_range_m, dsec.key("path") if dsec.has("path") else dsec.path)
         ksec = sec.section("dem_knowledge")
-        known = terrain.knowledge_dem_from_config(ksec, dem, seed=self.seed)
+        known = terrain.knowledge_dem_from_config(ksec, truth=dem, seed=self.seed)
         return dem, known
 
     def texture(self):
         from . import terrain
         sec = self.section("scene").section("texture")
-        return terrain.texture_from_config(sec, base_dir=self.base_dir, seed=self.seed)
+        return terrain.texture_from_config(sec, base_dir=self.base_dir, seed=self.seed, sun=self.sun())
 
     def sun(self):
         from . import terrain
@@ -293,12 +293,11 @@ def _build(raw: dict, path: Path | None, base_dir: Path) -> Scenario:
 
 def _validate_models(sc: Scenario) -> None:
     """Validate the tables built by other modules (attitude, terrain) without heavy work."""
-    from . import terrain
     sc.attitude_model()
     scene = sc.section("scene")
-    dsec = scene.section("dem", required=True)
-    terrain.validate_dem_config(dsec, base_dir=sc.base_dir)
-    terrain.validate_knowledge_dem_config(scene.section("dem_knowledge"))
+    for k in ("dem", "dem_knowledge", "texture", "sun"):
+        scene.section(k)
+    scene.finish()
+    sc.dems()
     sc.texture()
     sc.sun()
-    scene.finish()

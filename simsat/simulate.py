@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .product import atomic_write_dataset, atomic_write_json
+from .product import atomic_write_dataset, atomic_write_json, make_tmp_dir
 from .scenario import Scenario, load_scenario
 
 __all__ = ["simulate", "apply_radiometry", "SimulationResult", "build_world"]
@@ -59,7 +59,9 @@ def build_world(sc: Scenario):
     dem, known = sc.dems()
     texture = sc.texture()
     sun = sc.sun()
-    irr = terrain.irradiance_dem(dem, sun)
+    irr_z = terrain.sun_irradiance(dem, elevation_deg=sun.elevation_deg, azimuth_deg=sun.azimuth_deg,
+                                   ambient=sun.ambient, shadows=sun.cast_shadows)
+    irr = terrain.Dem(x0_m=dem.x0_m, y0_m=dem.y0_m, dx_m=dem.dx_m, dy_m=dem.dy_m, z=irr_z)
     return model, dem, known, texture, irr
 
 
@@ -149,7 +151,7 @@ def simulate(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: 
 
     # write everything into a temp dir, then move into place
     out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".part", dir=out_dir.parent))
+    tmp = make_tmp_dir(out_dir)
     try:
         t = _time.perf_counter()
         atomic_write_dataset(ds, tmp / "product.nc")

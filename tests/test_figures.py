@@ -297,10 +297,11 @@ def test_mc_wiener_k_and_tau_families_on_curves(integrate):
 
 
 def test_mc_fusion_on_joint_curve(integrate):
-    d = F.fig13_data(monte_carlo=True, n_trials=8, seed=7, integrate=integrate)
+    d = F.fig13_data(monte_carlo=True, n_trials=6, seed=7, integrate=integrate,
+                     mc_freqs_hz=(0.4, 1.5, 5.81, 22.5, 67.57, 135.14, 270.27, 400.0))
     pairs = list(F.PATENT_PAIRS.values())
     r = _rows(d.table, "joint_chain_gain", "monte_carlo")
-    assert r["value"].size >= 10
+    assert r["value"].size == 8
     _assert_within_bars(r["value"], ref_joint_chain_gain(r["freq_hz"], pairs, K), r["stderr"],
                         what="fusion chain gain")
     r = _rows(d.table, "chain_gain", "monte_carlo")
@@ -309,6 +310,9 @@ def test_mc_fusion_on_joint_curve(integrate):
 
 
 def test_mc_polynomial_on_curve(integrate):
+    why = F.method_unavailable("polynomial", integrate, degree=5)
+    if why:
+        pytest.skip(why)
     d = F.fig14_data(taus_s=[0.01, 0.1], monte_carlo=True, mc_taus_s=(0.005, 0.1, 2.0),
                      n_trials=120, seed=8, integrate=integrate)
     for s in ("mean", "max"):

@@ -44,6 +44,9 @@ class RenderStats:
     rays: int = 0
     intersect_s: float = 0.0
     texture_s: float = 0.0
+    texture_synthesis_s: float = 0.0
+    texture_strip_s: float = 0.0
+    prefilter_s: float = 0.0
     raygen_s: float = 0.0
     shade_s: float = 0.0
     wall_s: float = 0.0
@@ -158,71 +161,130 @@ class PushbroomRenderer:
         o = s[:, :, None, None, :] + lift[..., None] * d
         return o, d
 
-    # -- texture strip -----------------------------------------------------------
-    def _texture_strip(self, x_min, x_max, y_min, y_max, band_index: int):
+    # -- texture strips ---------------------------------------------------------
+    def _prefilter_kernel(self) -> np.ndarray:
         te = self.texel_m
         gsd = self.platform.altitude_m * self.instrument.detectors[0].pitch_m / self.instrument.focal_length_m
         psf_sigma_m = self.instrument.psf_sigma_px() * gsd
         box_m = gsd if self.instrument.spatial_subsamples == 1 else 0.0
-        k = ground_prefilter_kernel(box_texels=box_m / te, psf_sigma_texels=psf_sigma_m / te)
-        pad = len(k) // 2 + 2
-        x0 = np.floor(x_min / te) * te - pad * te
-        y0 = np.floor(y_min / te) * te - pad * te
-        nx = int(np.ceil((x_max - x0) / te)) + pad + 1
-        ny = int(np.ceil((y_max - y0) / te)) + pad + 1
-        tex = np.asarray(self.texture.grid(x0, y0, te, nx, ny), dtype=np.float32)[band_index]
+        return ground_prefilter_kernel(box_texels=box_m / te, psf_sigma_texels=psf_sigma_m / te)
+
+    def _tile(self, k: int) -> np.ndarray:
+        """Reflectance × irradiance of along-track tile ``k`` (all bands), cached."""
+        if k in self._tiles:
+            return self._tiles[k]
+        te = self.texel_m
+        x0 = k * self._tile_nx * te
+        t0 = _time.perf_counter()
+        tex = np.asarray(self.texture.grid(x0, self._tile_y0, te, self._tile_nx, self._tile_ny), dtype=np.float32)
         if self.irradiance is not None:
-            xs = x0 + np.arange(nx) * te
-            ys = y0 + np.arange(ny) * te
-            irr = _bilinear_grid(self.irradiance, xs, ys)
-            tex = tex * irr.astype(np.float32)
-        if len(k) > 1:
+            xs = x0 + (np.arange(self._tile_nx) + 0.5) * te
+            ys = self._tile_y0 + (np.arange(self._tile_ny) + 0.5) * te
+            tex = tex * _bilinear_grid(self.irradiance, xs, ys).astype(np.float32)[None]
+        self.stats.texture_synthesis_s += _time.perf_counter() - t0
+        # keep only tiles that later blocks may need (the push-broom moves forward)
+        for old in [j for j in self._tiles if j < k - 2]:
+            del self._tiles[old]
+        self._tiles[k] = tex
+        return tex
+
+    def _texture_strip(self, x_min: float, x_max: float):
+        """Prefiltered texture (nbands, ny, nx) covering [x_min, x_max] and its origin (x0, y0) [m]."""
+        te = self.texel_m
+        pad = len(self._kernel) // 2 + 2
+        k0 = int(np.floor((x_min - pad * te) / (self._tile_nx * te)))
+        k1 = int(np.floor((x_max + pad * te) / (self._tile_nx * te)))
+        tex = np.concatenate([self._tile(k) for k in range(k0, k1 + 1)], axis=2)
+        x0 = k0 * self._tile_nx * te
+        # crop to what is needed (+ padding for the prefilter)
+        i0 = max(int(np.floor((x_min - x0) / te)) - pad, 0)
+        i1 = min(int(np.ceil((x_max - x0) / te)) + pad + 1, tex.shape[2])
+        tex = tex[:, :, i0:i1]
+        x0 = x0 + i0 * te
+        t0 = _time.perf_counter()
+        if len(self._kernel) > 1:
             import cv2
-            kk = k.astype(np.float32)
-            tex = cv2.sepFilter2D(tex, cv2.CV_32F, kk, kk, borderType=cv2.BORDER_REPLICATE)
-        return tex, x0, y0
+            kk = self._kernel.astype(np.float32)
+            tex = np.stack([cv2.sepFilter2D(np.ascontiguousarray(b), cv2.CV_32F, kk, kk,
+                                            borderType=cv2.BORDER_REPLICATE) for b in tex])
+        self.stats.prefilter_s += _time.perf_counter() - t0
+        return tex, x0, self._tile_y0
+
+    def _setup_tiles(self, y_min: float, y_max: float):
+        te = self.texel_m
+        pad = len(self._kernel) // 2 + 2
+        self._tile_y0 = float(np.floor(y_min / te) - pad) * te
+        self._tile_ny = int(np.ceil((y_max - self._tile_y0) / te)) + pad + 1
+        self._tile_nx = max(64, int(round(256.0 / te)))
 
     # -- rendering ---------------------------------------------------------------
+    def _rays_drjit(self, det, t_lines: np.ndarray):
+        """Lifted float32 rays built in Dr.Jit from float64 attitude/positions (one fused kernel)."""
+        import drjit as dr
+        import mitsuba as mi
+
+        F64 = dr.llvm.ad.Float64 if self.variant.startswith("llvm") else dr.cuda.ad.Float64
+        U32 = mi.UInt32
+        ts = self._sample_times(t_lines).ravel()
+        r = rotation_matrices(*self.attitude(ts)).reshape(-1, 9)
+        s = self.platform.position(ts)
+        b = self.body_directions(det).reshape(-1, 3)
+        n_cs = b.shape[0]
+        n = ts.size * n_cs
+        idx = dr.arange(U32, n)
+        ti = idx // n_cs
+        ci = idx - ti * n_cs
+        R = [dr.gather(F64, F64(r[:, k]), ti) for k in range(9)]
+        B = [dr.gather(F64, F64(b[:, k]), ci) for k in range(3)]
+        S = [dr.gather(F64, F64(s[:, k]), ti) for k in range(3)]
+        d = [R[3 * i] * B[0] + R[3 * i + 1] * B[1] + R[3 * i + 2] * B[2] for i in range(3)]
+        lift = (S[2] - self.z_lift) / (-d[2])
+        o = [S[i] + lift * d[i] for i in range(3)]
+        ray = mi.Ray3f(mi.Point3f(mi.Float(o[0]), mi.Float(o[1]), mi.Float(o[2])),
+                       mi.Vector3f(mi.Float(d[0]), mi.Float(d[1]), mi.Float(d[2])))
+        # ground x-extent of the block: edge columns only (cheap), between z_max and z_min
+        bb = b.reshape(det.pixels, -1, 3)[[0, -1]].reshape(-1, 3)
+        de = np.einsum("tij,cj->tci", r.reshape(-1, 3, 3), bb)
+        xs = []
+        for z in (self.dem.z_max, self.dem.z_min):
+            sz = (s[:, None, 2] - z) / (-de[..., 2])
+            xs.append(s[:, None, 0] + sz * de[..., 0])
+        xs = np.concatenate([x.ravel() for x in xs])
+        return ray, n, (float(xs.min()) - 20.0, float(xs.max()) + 20.0)
+
     def render_block(self, det, t_lines: np.ndarray) -> np.ndarray:
         """Render lines at times ``t_lines`` for one detector → (L, C) float32 radiance."""
         import drjit as dr
         import mitsuba as mi
 
+        if not hasattr(self, "_tiles"):
+            self._init_tiles()
         t0 = _time.perf_counter()
-        o, d = self.rays(det, t_lines)
-        shape = o.shape[:-1]
-        o = o.reshape(-1, 3)
-        d = d.reshape(-1, 3)
-        # ground bounding box of the block: between each ray's points at z_max and z_min
-        zs = np.array([self.dem.z_max, self.dem.z_min])
-        sz = (o[:, 2:3] - zs[None, :]) / (-d[:, 2:3])
-        gx = o[:, 0:1] + sz * d[:, 0:1]
-        gy = o[:, 1:2] + sz * d[:, 1:2]
-        bbox = (gx.min(), gx.max(), gy.min(), gy.max())
-        o32 = o.astype(np.float32)
-        d32 = d.astype(np.float32)
+        ray, n, (x_min, x_max) = self._rays_drjit(det, t_lines)
         t1 = _time.perf_counter()
-        ray = mi.Ray3f(mi.Point3f(o32[:, 0], o32[:, 1], o32[:, 2]), mi.Vector3f(d32[:, 0], d32[:, 1], d32[:, 2]))
         si = self.scene.ray_intersect(ray)
         px, py, valid = si.p.x, si.p.y, si.is_valid()
         dr.eval(px, py, valid)
         dr.sync_thread()
         t2 = _time.perf_counter()
+        tex, x0, y0 = self._strip_cache(x_min, x_max)
         bi = list(self.texture.bands).index(det.band)
-        tex, x0, y0 = self._texture_strip(*bbox, band_index=bi)
         t3 = _time.perf_counter()
-        ny, nx = tex.shape
+        band = tex[bi]
+        ny, nx = band.shape
         te = self.texel_m
-        dtex = mi.Texture2f(mi.TensorXf(tex[:, :, None]), use_accel=False, migrate=False,
+        dtex = mi.Texture2f(mi.TensorXf(band[:, :, None]), use_accel=False, migrate=False,
                             filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
-        u = (px - float(x0)) / float(nx * te) + 0.5 / nx
-        v = (py - float(y0)) / float(ny * te) + 0.5 / ny
+        # texel (j, i) is centred at (x0 + (i + 1/2) te, y0 + (j + 1/2) te): u = (x - x0) / (nx te)
+        u = (px - float(x0)) / float(nx * te)
+        v = (py - float(y0)) / float(ny * te)
         val = dr.select(valid, dtex.eval(mi.Point2f(u, v))[0], 0.0)
+        shape = (len(t_lines), self.instrument.time_subsamples, det.pixels, self.instrument.spatial_subsamples ** 2)
         out = np.array(val, dtype=np.float32).reshape(shape)
-        misses = int(np.count_nonzero(~np.array(valid)))
+        misses = int(n - dr.count(valid)[0]) if hasattr(dr.count(valid), "__getitem__") else int(n - dr.count(valid))
         t4 = _time.perf_counter()
         st = self.stats
-        st.rays += int(np.prod(shape))
+        st.rays += n
         st.raygen_s += t1 - t0
         st.intersect_s += t2 - t1
         st.texture_s += t3 - t2
@@ -231,6 +293,34 @@ class PushbroomRenderer:
         st.blocks += 1
         # mean over time sub-samples and sub-pixels: (L, nt, C, S) -> (L, C)
         return out.mean(axis=(1, 3))
+
+    def _init_tiles(self):
+        self._kernel = self._prefilter_kernel()
+        self._tiles = {}
+        self._strip = None
+        # across-track extent: every detector's edge columns over the DEM height range (+ margin)
+        f = self.instrument.focal_length_m
+        ys = []
+        for d in self.instrument.detectors:
+            for u in (-1.0, d.pixels):
+                ang = np.arctan(d.focal_plane_y(u) / f) + self.platform.off_nadir_roll_rad
+                ys.append(self.platform.y_m + (self.platform.altitude_m - self.dem.z_min) * np.tan(ang))
+        margin = 100.0
+        self._setup_tiles(min(ys) - margin, max(ys) + margin)
+
+    def _strip_cache(self, x_min: float, x_max: float):
+        """The prefiltered strip for the current block, shared by every detector of the block."""
+        st = self._strip
+        if st is not None and st[1] <= x_min and x_max <= st[2]:
+            return st[0]
+        # one strip per block covering all detectors (bands are a few hundred metres apart)
+        lo = x_min - 400.0
+        hi = x_max + 400.0
+        t0 = _time.perf_counter()
+        strip = self._texture_strip(lo, hi)
+        self.stats.texture_strip_s += _time.perf_counter() - t0
+        self._strip = (strip, lo, hi)
+        return strip
 
     def render(self, t_lines: np.ndarray, *, block_lines: int = 256, progress=None) -> dict[str, np.ndarray]:
         """Render every detector at the line times → {name: (L, C) float32 radiance}."""
@@ -246,24 +336,21 @@ class PushbroomRenderer:
         self.stats.wall_s += _time.perf_counter() - t_start
         return out
 
-    def ray_intersect_ceiling(self, det, t_lines: np.ndarray, *, repeats: int = 2) -> float:
+    def ray_intersect_ceiling(self, det, t_lines: np.ndarray, *, repeats: int = 3) -> float:
         """Raw ``scene.ray_intersect`` throughput [rays/s] on this block's rays (prepared beforehand)."""
         import drjit as dr
-        import mitsuba as mi
 
-        o, d = self.rays(det, t_lines)
-        o32 = o.reshape(-1, 3).astype(np.float32)
-        d32 = d.reshape(-1, 3).astype(np.float32)
-        ray = mi.Ray3f(mi.Point3f(o32[:, 0], o32[:, 1], o32[:, 2]), mi.Vector3f(d32[:, 0], d32[:, 1], d32[:, 2]))
+        ray, n, _ = self._rays_drjit(det, t_lines)
         dr.eval(ray)
+        dr.sync_thread()
         best = np.inf
         for _ in range(repeats):
             t0 = _time.perf_counter()
             si = self.scene.ray_intersect(ray)
-            dr.eval(si.p, si.t)
+            dr.eval(si.p.x, si.p.y, si.is_valid())
             dr.sync_thread()
             best = min(best, _time.perf_counter() - t0)
-        return len(o32) / best
+        return n / best
 
 
 def _bilinear_grid(grid_dem, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:

@@ -40,8 +40,8 @@ def _mix32(h: np.ndarray) -> np.ndarray:
 
 def hash2(ix, iy, salt: int) -> np.ndarray:
     """Hash of two integer lattice coordinates (any broadcastable int arrays) → uint32."""
-    a = np.asarray(ix).astype(np.int64).astype(_U32)
-    b = np.asarray(iy).astype(np.int64).astype(_U32)
+    a = np.asarray(ix).astype(_U32)
+    b = np.asarray(iy).astype(_U32)
     h = _mix32(a ^ _U32(salt & 0xFFFFFFFF))
     h = _mix32(h + b * _U32(0x9E3779B9))
     return h
@@ -50,7 +50,7 @@ def hash2(ix, iy, salt: int) -> np.ndarray:
 def hash3(ix, iy, iz, salt: int) -> np.ndarray:
     """Hash of three integer coordinates → uint32."""
     h = hash2(ix, iy, salt)
-    c = np.asarray(iz).astype(np.int64).astype(_U32)
+    c = np.asarray(iz).astype(_U32)
     return _mix32(h ^ (c * _U32(0x85EBCA77)))
 
 
@@ -116,28 +116,98 @@ class Coords:
         return Coords(qx, qy, False)
 
 
-def table_lookup(fn: Callable, i: np.ndarray, j: np.ndarray, *, max_ratio: float = 4.0) -> np.ndarray:
-    """``fn(i, j)`` for integer index arrays, via a bounding-box table when compact.
+def table_lookup(fn: Callable, i: np.ndarray, j: np.ndarray | None = None, *,
+                 max_ratio: float = 4.0) -> np.ndarray:
+    """``fn(i, j)`` (or ``fn(i)``) for integer index arrays, via a bounding-box table when compact.
 
-    ``fn`` must be elementwise (value depends only on the (i, j) pair), so both
-    ways give bit-identical results.
+    ``fn`` must be elementwise (a value depends only on its (i, j) pair), so both
+    ways give bit-identical results; the table is just faster when many texels
+    share few indices.
     """
-    i = np.asarray(i, dtype=np.int64)
-    j = np.asarray(j, dtype=np.int64)
-    shape = np.broadcast_shapes(i.shape, j.shape)
-    n = int(np.prod(shape)) if shape else 1
+    i = np.asarray(i)
+    n = i.size if j is None else int(np.prod(np.broadcast_shapes(i.shape, np.shape(j))))
     if n == 0:
-        return fn(i, j)
+        return fn(i) if j is None else fn(i, np.asarray(j))
     i0, i1 = int(i.min()), int(i.max())
+    if j is None:
+        if (i1 - i0 + 1) > max_ratio * n + 4096:
+            return fn(i)
+        table = fn(np.arange(i0, i1 + 1, dtype=np.int64))
+        return table[i - i0] if i0 else table[i]
+    j = np.asarray(j)
     j0, j1 = int(j.min()), int(j.max())
-    size = (i1 - i0 + 1) * (j1 - j0 + 1)
+    w = i1 - i0 + 1
+    size = w * (j1 - j0 + 1)
     if size > max_ratio * n + 4096:
         ib, jb = np.broadcast_arrays(i, j)
         return fn(ib, jb)
-    ii = np.arange(i0, i1 + 1, dtype=np.int64)[None, :]
-    jj = np.arange(j0, j1 + 1, dtype=np.int64)[:, None]
-    table = fn(ii, jj)
-    return table[j - j0, i - i0]
+    table = fn(np.arange(i0, i1 + 1, dtype=np.int64)[None, :],
+               np.arange(j0, j1 + 1, dtype=np.int64)[:, None])
+    table = np.ascontiguousarray(np.broadcast_to(table, (j1 - j0 + 1, w))).ravel()
+    if j1 == j0:
+        return table[i - i0]
+    idx = j * w + i
+    idx -= j0 * w + i0
+    return table[idx]
+
+
+class Lookup:
+    """Elementwise functions of integer indices (i, j), tabulated on a shared box.
+
+    ``Lookup(fns, i_lo, i_hi, j_lo, j_hi, n)`` tabulates each ``fn(i, j)`` on
+    ``[i_lo, i_hi] × [j_lo, j_hi]`` when that box is small compared with ``n``
+    (the number of texels that will use it); otherwise the functions are called
+    directly. Either way the values are bit-identical. A function may return a
+    tuple of arrays; outputs are numbered in order over all functions.
+    """
+
+    def __init__(self, fns, i_lo: int, i_hi: int, j_lo: int, j_hi: int, n: int, *, max_ratio: float = 4.0):
+        self.fns = fns
+        self.i0, self.j0 = int(i_lo), int(j_lo)
+        self.w = int(i_hi) - self.i0 + 1
+        h = int(j_hi) - self.j0 + 1
+        self.tabulated = self.w * h <= max_ratio * n + 4096
+        if self.tabulated:
+            ii = np.arange(self.i0, self.i0 + self.w, dtype=np.int64)[None, :]
+            jj = np.arange(self.j0, self.j0 + h, dtype=np.int64)[:, None]
+            self.tables = []
+            for f in fns:
+                r = f(ii, jj)
+                for a in (r if isinstance(r, tuple) else (r,)):
+                    self.tables.append(np.ascontiguousarray(np.broadcast_to(a, (h, self.w))).ravel())
+
+    @classmethod
+    def around(cls, fns, i, j, n: int, *, margin_i: int = 0, margin_j: int = 0) -> "Lookup":
+        if np.size(i) == 0:
+            return cls(fns, 0, 0, 0, 0, 1)
+        return cls(fns, int(np.min(i)) - margin_i, int(np.max(i)) + margin_i,
+                   int(np.min(j)) - margin_j, int(np.max(j)) + margin_j, n)
+
+    def index(self, i, j):
+        """An opaque index for (i, j) (a flat table index, or the pair itself)."""
+        if self.tabulated:
+            idx = np.asarray(j) * self.w + np.asarray(i)
+            idx -= self.j0 * self.w + self.i0
+            return idx
+        return np.broadcast_arrays(np.asarray(i, np.int64), np.asarray(j, np.int64))
+
+    def shift_i(self, idx, di):
+        """Index of (i + di, j) given the index of (i, j); ``di`` may be an array."""
+        if self.tabulated:
+            return idx + di
+        return (idx[0] + di, idx[1])
+
+    def take(self, k: int, idx):
+        """Values of output ``k`` at an index."""
+        if self.tabulated:
+            return self.tables[k][idx]
+        for f in self.fns:
+            r = f(*idx)
+            r = r if isinstance(r, tuple) else (r,)
+            if k < len(r):
+                return r[k]
+            k -= len(r)
+        raise IndexError("Lookup output out of range")
 
 
 def lattice_interp(c: Coords, cell_m: float, lattice_fn: Callable, *, smooth: bool = True,
@@ -156,6 +226,12 @@ def lattice_interp(c: Coords, cell_m: float, lattice_fn: Callable, *, smooth: bo
     table : bool
         For scattered points: evaluate ``lattice_fn`` once on the bounding box of the
         needed nodes when compact (use for expensive lattice functions).
+
+    Notes
+    -----
+    The grid path (separable: interpolate lattice rows along x, then along y) and
+    the points path (four corners per point) perform the same float32 operations
+    in the same order, so they agree bit for bit.
     """
     cell_q = int(round(cell_m * QUANTA_PER_M))
     ix, wx = _weights(c.qx, cell_q, smooth)
@@ -171,20 +247,24 @@ def lattice_interp(c: Coords, cell_m: float, lattice_fn: Callable, *, smooth: bo
         nly = int(ly.max()) + 2
         L = lattice_fn(np.arange(ixs, ixs + nlx, dtype=np.int64)[None, :],
                        np.arange(iys, iys + nly, dtype=np.int64)[:, None])
-        L = np.ascontiguousarray(L, dtype=_F32)
+        L = np.ascontiguousarray(np.broadcast_to(L, (nly, nlx)), dtype=_F32)
         A0 = L[:, lx]
         A = A0 + (L[:, lx + 1] - A0) * wx
         B0 = A[ly]
         return B0 + (A[ly + 1] - B0) * wy
-    if table:
-        def g(i, j):
-            return table_lookup(lattice_fn, i, j)
+    if table and ix.size:
+        look = Lookup.around([lattice_fn], ix, iy, ix.size, margin_i=1, margin_j=1)
+        i00 = look.index(ix, iy)
+        i01 = look.index(ix, iy + 1)
+        l00 = look.take(0, i00)
+        l10 = look.take(0, look.shift_i(i00, 1))
+        l01 = look.take(0, i01)
+        l11 = look.take(0, look.shift_i(i01, 1))
     else:
-        g = lattice_fn
-    l00 = g(ix, iy)
-    l10 = g(ix + 1, iy)
-    l01 = g(ix, iy + 1)
-    l11 = g(ix + 1, iy + 1)
+        l00 = lattice_fn(ix, iy)
+        l10 = lattice_fn(ix + 1, iy)
+        l01 = lattice_fn(ix, iy + 1)
+        l11 = lattice_fn(ix + 1, iy + 1)
     a0 = l00 + (l10 - l00) * wx
     a1 = l01 + (l11 - l01) * wx
     return a0 + (a1 - a0) * wy

@@ -253,7 +253,7 @@ class Dem:
             return self
         err = np.full(self.shape, float(bias_m))
         if noise_m > 0:
-            rng = np.random.default_rng(seed)
+            rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, 12])
             e = rng.standard_normal(self.shape)
             if correlation_m > 0:
                 e = ndimage.gaussian_filter(e, sigma=(correlation_m / self.dy_m, correlation_m / self.dx_m),
@@ -335,7 +335,7 @@ def fractal_dem(*, x_range_m, y_range_m, resolution_m: float, relief_m: float,
         raise ValueError(f"resolution_m: {resolution_m:g} m gives {nx} x {ny} samples (> 64 M)")
     if relief_m == 0:
         return Dem(x0, y0, resolution_m, resolution_m, np.zeros((ny, nx)))
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, 11])
     # synthesise on a padded grid so the FFT periodicity does not show
     px, py = int(nx * 1.5) + 8, int(ny * 1.5) + 8
     kx = np.fft.rfftfreq(px, d=resolution_m)

@@ -1,0 +1,196 @@
+"""``simsat bench``: benchmarks written to JSON (accuracy and speed live here, not in tests)."""
+from __future__ import annotations
+
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time as _time
+from pathlib import Path
+
+import numpy as np
+
+from simsat.product import atomic_write_json
+
+__all__ = ["run_bench", "format_result", "bench_render", "bench_restore"]
+
+
+def _peak_rss_gb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 ** 2  # kB → GB
+
+
+def _render_measure(scenario: str, lines: int | None, full: bool) -> dict:
+    """Render a scenario (or its first ``lines`` lines) and measure throughput vs the ray_intersect ceiling."""
+    from simsat.scenario import load_scenario
+    from simsat.simulate import build_world
+    from simsat.render.pushbroom import PushbroomRenderer
+
+    over = {"acquisition": {"lines": lines}} if lines else None
+    t0 = _time.perf_counter()
+    sc = load_scenario(scenario, overrides=over)
+    model, dem, known, texture, irr = build_world(sc)
+    t_world = _time.perf_counter() - t0
+    t1 = _time.perf_counter()
+    r = PushbroomRenderer(platform=sc.platform, instrument=sc.instrument, dem=dem, texture=texture,
+                          attitude=model.evaluate, irradiance=irr)
+    t_scene = _time.perf_counter() - t1
+    t_lines = sc.line_times
+    r.render(t_lines, block_lines=sc.acquisition.block_lines)
+    st = r.stats
+    # ceiling: raw ray_intersect on the same kind of rays (one block per detector, prepared beforehand)
+    blk = t_lines[: min(sc.acquisition.block_lines, len(t_lines))]
+    ceilings = [r.ray_intersect_ceiling(d, blk) for d in sc.instrument.detectors]
+    ceiling = float(np.mean(ceilings))
+    out = {
+        "scenario": sc.name, "lines": int(len(t_lines)), "pixels": int(sc.instrument.detectors[0].pixels),
+        "bands": len(sc.instrument.detectors), "variant": st.variant, "rays": st.rays,
+        "render_wall_s": st.wall_s, "rays_per_s": st.rays_per_s, "ray_intersect_ceiling_rays_per_s": ceiling,
+        "ratio_to_ceiling": st.rays_per_s / ceiling,
+        "breakdown_s": {"ray_generation": st.raygen_s, "ray_intersect": st.intersect_s,
+                        "texture_strip": st.texture_s, "texture_lookup_and_transfer": st.shade_s},
+        "world_build_s": t_world, "scene_build_s": t_scene, "peak_rss_gb": _peak_rss_gb(),
+        "cpu_count": os.cpu_count(),
+    }
+    return out
+
+
+def bench_render(*, scenario: str | None = None, lines: int | None = None, full_lines: int = 128) -> dict:
+    """Render ``phr_cmg`` (or ``scenario``) in full, then ``phr_full`` over ``full_lines`` lines in a
+    subprocess (its own peak memory), and extrapolate phr_full's time."""
+    res = {"main": _render_measure(scenario or "phr_cmg", lines, True)}
+    if scenario in (None, "phr_cmg"):
+        code = ("import json,sys; from reports.bench import _render_measure; "
+                f"print('@@'+json.dumps(_render_measure('phr_full', {full_lines}, False)))")
+        p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           cwd=str(Path(__file__).resolve().parents[1]))
+        line = [x for x in p.stdout.splitlines() if x.startswith("@@")]
+        if p.returncode == 0 and line:
+            full = json.loads(line[0][2:])
+            from simsat.scenario import load_scenario
+            total_lines = load_scenario("phr_full", check_models=False).acquisition.lines
+            full["full_lines"] = total_lines
+            full["extrapolated_full_render_s"] = full["render_wall_s"] * total_lines / full["lines"]
+            full["extrapolated_full_total_s"] = full["extrapolated_full_render_s"] + full["world_build_s"] + \
+                full["scene_build_s"]
+            full["memory_bounded"] = "rendering works block by block (texture strips per block); peak RSS is " \
+                                     "dominated by the scene and one block, independent of the image length"
+            res["phr_full"] = full
+        else:
+            res["phr_full"] = {"error": (p.stderr or p.stdout)[-2000:]}
+    return res
+
+
+def bench_restore(*, scenario: str | None = None, lines: int | None = None, seed: int = 0) -> dict:
+    """Differential-level CNES case (all integration methods) + end-to-end on a rendered scenario."""
+    from reports.bench_integration import bench_integration
+    out = {"differential_cnes_case": bench_integration(seed=seed)}
+    out["end_to_end"] = bench_end_to_end(scenario=scenario or "phr_cmg", lines=lines)
+    return out
+
+
+def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | None = None) -> dict:
+    """Render (if needed), restore, and score against truth with the accuracy metric of DESIGN.md."""
+    from restore.pipeline import restore_run
+    from simsat.product import read_truth
+    from simsat.scenario import load_scenario
+    from simsat.simulate import simulate
+
+    from .metrics import attitude_errors
+
+    sc = load_scenario(scenario, overrides={"acquisition": {"lines": lines}} if lines else None)
+    rd = Path(run_dir) if run_dir else Path("runs") / f"bench_{sc.name}" + (f"_{lines}" if lines else "")
+    rd = Path(str(rd))
+    t0 = _time.perf_counter()
+    simulate(sc, rd, progress=False)
+    t_render = _time.perf_counter() - t0
+    t1 = _time.perf_counter()
+    res = restore_run(rd, progress=False)
+    t_restore = _time.perf_counter() - t1
+    import xarray as xr
+    truth = read_truth(rd)
+    rest = xr.load_dataset(rd / "restoration.nc")
+    errs = attitude_errors(rest, truth)
+    return {"scenario": sc.name, "lines": sc.acquisition.lines, "render_s": t_render, "restore_s": t_restore,
+            "errors": errs, "misregistration": res.misregistration, "timings": res.timings,
+            "coverage": res.coverage, "run_dir": str(rd)}
+
+
+def _bench_scaling(scenario: str = "phr_cmg", sizes=(1000, 2000, 4000)) -> dict:
+    """Restore time versus image length (should be linear)."""
+    out = []
+    for n in sizes:
+        r = bench_end_to_end(scenario=scenario, lines=n)
+        out.append({"lines": n, "restore_s": r["restore_s"]})
+    return {"scaling": out}
+
+
+def run_bench(what: str, *, scenario: str | None = None, out: str | None = None, lines: int | None = None,
+              seed: int = 0) -> dict:
+    """Run one benchmark, write its JSON, return the result (with ``_path``)."""
+    t0 = _time.perf_counter()
+    if what == "render":
+        result = bench_render(scenario=scenario, lines=lines)
+    elif what == "restore":
+        result = bench_restore(scenario=scenario, lines=lines, seed=seed)
+    elif what == "matching":
+        from reports.bench_matching import bench_matching
+        result = bench_matching(seed=seed)
+    elif what == "integration":
+        from reports.bench_integration import bench_integration
+        result = bench_integration(seed=seed)
+    else:
+        raise ValueError(f"what: unknown benchmark {what!r}")
+    result = {"benchmark": what, "result": result, "wall_s": _time.perf_counter() - t0,
+              "date": _time.strftime("%Y-%m-%dT%H:%M:%S")}
+    path = Path(out) if out else Path("bench") / f"{what}.json"
+    atomic_write_json(result, path)
+    result["_path"] = str(path)
+    return result
+
+
+def format_result(what: str, result: dict) -> str:
+    r = result["result"]
+    lines = []
+    if what == "render":
+        for key in ("main", "phr_full"):
+            m = r.get(key)
+            if not m:
+                continue
+            if "error" in m:
+                lines.append(f"{key}: failed: {m['error'][-300:]}")
+                continue
+            lines.append(f"{m['scenario']}: {m['lines']} lines x {m['pixels']} px x {m['bands']} bands, {m['variant']}")
+            lines.append(f"  rendered   {m['rays_per_s'] / 1e6:8.2f} Mrays/s  ({m['rays']:,} rays in {m['render_wall_s']:.1f} s)")
+            lines.append(f"  ceiling    {m['ray_intersect_ceiling_rays_per_s'] / 1e6:8.2f} Mrays/s  (raw scene.ray_intersect)")
+            lines.append(f"  ratio      {m['ratio_to_ceiling'] * 100:8.1f} %")
+            lines.append(f"  peak RSS   {m['peak_rss_gb']:8.2f} GB")
+            if "extrapolated_full_render_s" in m:
+                lines.append(f"  full {m['full_lines']} lines: extrapolated render {m['extrapolated_full_render_s']:.0f} s "
+                             f"(+ {m['world_build_s'] + m['scene_build_s']:.0f} s world/scene build)")
+    elif what in ("restore", "integration", "matching"):
+        try:
+            if what == "matching":
+                from reports.bench_matching import format_table
+                return format_table(r)
+            if what == "integration":
+                from reports.bench_integration import format_table
+                return format_table(r)
+            from reports.bench_integration import format_table
+            lines.append(format_table(r["differential_cnes_case"]))
+            e = r["end_to_end"]
+            lines.append("")
+            lines.append(f"end to end on {e['scenario']} ({e['lines']} lines): restore {e['restore_s']:.1f} s, "
+                         f"{e['timings']['lines_per_s']:.0f} lines/s, {e['timings']['matches_per_s']:.0f} matches/s")
+            lines.append(f"  {'axis':6s} {'RMS px':>8s} {'99.7% px':>9s} {'RMS µrad':>9s} {'AOCS RMS px':>12s} {'gain':>6s} {'coverage':>9s}")
+            for ax, v in e["errors"].items():
+                lines.append(f"  {ax:6s} {v['rms_px']:8.4f} {v['p997_px']:9.4f} {v['rms_urad']:9.4f} "
+                             f"{v['knowledge_rms_px']:12.4f} {v['knowledge_rms_px'] / max(v['rms_px'], 1e-12):6.1f} "
+                             f"{v['coverage'] * 100:8.1f}%")
+            for k, v in e["misregistration"].items():
+                lines.append(f"  misregistration {k}: before {v['before_px']:.3f} px, after {v['after_px']:.3f} px")
+        except Exception as ex:  # pragma: no cover - formatting must never hide the JSON
+            lines.append(json.dumps(r, indent=1, default=str)[:4000])
+            lines.append(f"(formatting failed: {ex})")
+    return "\n".join(lines)

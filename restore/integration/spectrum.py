@@ -1,0 +1,297 @@
+"""Spectral analysis of attitude differentials: noise level, signal PSD, lines.
+
+Everything here is estimated from the differentials themselves (never from
+truth).  Model: ``d_j(n) = theta(n dt + tau_j) - theta(n dt) + b_j(n)`` with
+``b_j`` white of variance ``sigma_j**2``, so the two-sided PSDs (rad²/Hz) obey
+``P_j(f) = |G_j(f)|**2 S(f) + sigma_j**2 dt`` with ``G_j = exp(2 pi i f tau_j) - 1``.
+
+* Noise: ``P_j`` near pair ``j``'s blind frequencies ``n / tau_j`` (n >= 1), where
+  ``|G_j|**2 < 0.05``, is (almost) pure noise; its median gives ``sigma_j``.
+* Signal PSD: the pairs' smoothed periodograms are combined by weighted least
+  squares, ``S = sum_j b_j (P_j / nu_j - 1)``; a frequency is kept only where
+  this exceeds a significance threshold (gamma approximation of the smoothed
+  periodogram's distribution, Bonferroni over the band), so that noise-only
+  frequencies get ``S = 0`` and the Wiener gain there is 0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.fft import next_fast_len, rfft
+from scipy.ndimage import maximum_filter1d, uniform_filter1d
+from scipy.signal import find_peaks
+from scipy.stats import gamma
+
+from ._common import per_pair, prepare
+
+__all__ = ["SpectralEstimate", "estimate_noise", "estimate_spectrum", "find_lines", "Lines"]
+
+_BLIND_G2 = 0.05
+
+
+def _taper(n: int) -> np.ndarray:
+    return np.hanning(n + 2)[1:-1]
+
+
+def _segments(valid_row: np.ndarray, min_len: int) -> list[tuple[int, int]]:
+    m = np.concatenate([[False], valid_row, [False]]).astype(np.int8)
+    d = np.diff(m)
+    segs = list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
+    long = [(a, b) for a, b in segs if b - a >= min_len]
+    return long or ([max(segs, key=lambda s: s[1] - s[0])] if segs else [])
+
+
+def _rel_var(w: np.ndarray, n_fft: int, L: int) -> float:
+    """Relative variance of an L-bin running mean of a periodogram with taper ``w``."""
+    W = np.abs(np.fft.fft(w**2, n=n_fft)) / np.sum(w**2)
+    lags = np.arange(-L + 1, L)
+    rho2 = W[np.abs(lags)] ** 2
+    return float(np.sum((L - np.abs(lags)) * rho2) / L**2)
+
+
+def _periodograms(D: np.ndarray, valid: np.ndarray, dt: float, n_fft: int, *,
+                  min_segment: int, smooth_bins: tuple[int, ...]):
+    """Two-sided PSD estimates (rad²/Hz) of each row, averaged over its gap-free segments.
+
+    Each segment gets its own Hann taper (no leakage through the gap pattern)
+    and mean removal; segments are averaged with weights proportional to their
+    taper energy.  Also returns, per row and per running-mean width, the gamma
+    shape ``k`` (= dof / 2) of the smoothed estimate.
+    """
+    p = D.shape[0]
+    P = np.zeros((p, n_fft // 2 + 1))
+    shapes = np.zeros((p, len(smooth_bins)))
+    cache: dict = {}
+    for j in range(p):
+        segs = _segments(valid[j], min_segment)
+        energies, rel = [], []
+        for a, b in segs:
+            x = D[j, a:b]
+            w = _taper(b - a)
+            F = rfft((x - np.sum(x * w) / np.sum(w)) * w, n=n_fft)
+            e = float(np.sum(w**2))
+            P[j] += np.abs(F) ** 2 * dt
+            energies.append(e)
+            key = b - a
+            if key not in cache:
+                cache[key] = [_rel_var(w, n_fft, L) for L in smooth_bins]
+            rel.append(cache[key])
+        e = np.asarray(energies)
+        P[j] /= max(e.sum(), 1e-300)
+        wts = e / max(e.sum(), 1e-300)
+        shapes[j] = 1.0 / np.maximum((wts[:, None] ** 2 * np.asarray(rel)).sum(0), 1e-12)
+    return P, shapes
+
+
+def _min_segment(taus: np.ndarray, dt: float) -> int:
+    return max(32, int(np.ceil(2 * taus.max() / dt)))
+
+
+def _noise_levels(P: np.ndarray, f: np.ndarray, taus: np.ndarray) -> np.ndarray:
+    """``sigma_j**2 dt`` per pair from the periodogram near blind frequencies."""
+    out = np.empty(P.shape[0])
+    f_nyq = f[-1]
+    for j, tau in enumerate(taus):
+        g2 = 2 * (1 - np.cos(2 * np.pi * f * tau))
+        sel = (g2 < _BLIND_G2) & (f > 0.5 / tau)
+        if sel.sum() >= 16:
+            out[j] = np.median(P[j, sel]) / np.log(2)
+        else:  # no blind frequency below Nyquist: least-contaminated upper sub-band
+            bands = np.array_split(np.flatnonzero(f > 0.1 * f_nyq), 8)
+            out[j] = min(np.median(P[j, b]) for b in bands if b.size) / np.log(2)
+    return out
+
+
+@dataclass
+class SpectralEstimate:
+    """Spectral description of the signal behind a set of differentials.
+
+    Attributes
+    ----------
+    freq : ndarray
+        Frequencies (Hz) of the rfft grid of length ``n_fft`` and step ``dt``.
+    psd : ndarray
+        Estimated two-sided PSD of ``theta`` (rad²/Hz), 0 where no signal was
+        detected (and at 0 Hz: the constant is unobservable).
+    noise_std : ndarray
+        Per-pair white-noise standard deviation of the differentials (rad).
+    detected : ndarray of bool
+        Frequencies where signal was detected.
+    n_fft : int
+        FFT length.
+    dt : float
+        Sampling step (s).
+    """
+
+    freq: np.ndarray
+    psd: np.ndarray
+    noise_std: np.ndarray
+    detected: np.ndarray
+    n_fft: int
+    dt: float
+
+    @property
+    def variance(self) -> float:
+        """Variance of theta implied by the PSD (rad²)."""
+        return float(2 * np.sum(self.psd) / (self.n_fft * self.dt))
+
+
+def estimate_noise(diffs, taus, dt, *, n_fft: int | None = None) -> np.ndarray:
+    """White-noise standard deviation of each differential (rad), from the data.
+
+    Uses the tapered periodogram near each pair's blind frequencies ``n / tau``
+    (``n >= 1``), where the signal is suppressed by ``|G|**2 < 0.05``.
+
+    Parameters
+    ----------
+    diffs : sequence of 1-D arrays
+        Differentials (rad), NaN at gaps.
+    taus : sequence of float
+        Lags (s).
+    dt : float
+        Sampling step (s).
+    n_fft : int, optional
+        FFT length (default: next fast length >= 1.5 N).
+    """
+    D, valid, taus, dt = prepare(diffs, taus, dt)
+    n_fft = n_fft or next_fast_len(int(1.5 * D.shape[1]))
+    P, _ = _periodograms(D, valid, dt, n_fft, min_segment=_min_segment(taus, dt), smooth_bins=(1,))
+    f = np.fft.rfftfreq(n_fft, dt)
+    return np.sqrt(_noise_levels(P, f, taus) / dt)
+
+
+def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=None,
+                      resolution_hz: float = 0.5, detection_hz: float = 2.0,
+                      false_alarm: float = 0.01, dilate_hz: float = 1.0,
+                      noise_floor: float = 1e-4) -> SpectralEstimate:
+    """Estimate the signal PSD and the noise levels from the differentials.
+
+    Parameters
+    ----------
+    diffs, taus, dt
+        As for :func:`restore.integration.integrate`.
+    n_fft : int, optional
+        FFT length (>= N; default next fast length >= 1.5 N).
+    noise_std : float or sequence, optional
+        Known per-pair noise standard deviation (rad); estimated if None.
+    resolution_hz : float
+        Width of the running mean giving the PSD values (Hz).
+    detection_hz : float
+        Second, wider running mean used only for detection (Hz).
+    false_alarm : float
+        Probability of at least one false detection over the band.
+    dilate_hz : float
+        Detected frequencies are widened by this (Hz) to keep line skirts.
+    noise_floor : float
+        Lower bound of the noise standard deviation relative to the
+        differentials' standard deviation (keeps noise-free data well posed).
+
+    Returns
+    -------
+    SpectralEstimate
+    """
+    D, valid, taus, dt = prepare(diffs, taus, dt)
+    p, n = D.shape
+    n_fft = int(n_fft or next_fast_len(int(1.5 * n)))
+    if n_fft < n:
+        raise ValueError(f"n_fft: must be >= the number of samples ({n}), got {n_fft}")
+    for name, v in (("resolution_hz", resolution_hz), ("detection_hz", detection_hz),
+                    ("dilate_hz", dilate_hz)):
+        if not v >= 0:
+            raise ValueError(f"{name}: must be >= 0, got {v}")
+    if not 0 < false_alarm < 1:
+        raise ValueError(f"false_alarm: must be in (0, 1), got {false_alarm}")
+    f = np.fft.rfftfreq(n_fft, dt)
+    df = f[1] - f[0]
+    widths = tuple(max(1, int(round(hz / df))) | 1 for hz in (resolution_hz, detection_hz))
+    P, shapes = _periodograms(D, valid, dt, n_fft, min_segment=_min_segment(taus, dt),
+                              smooth_bins=widths)
+    known = per_pair(noise_std, p, "noise_std")
+    nu = known**2 * dt if known is not None else _noise_levels(P, f, taus)
+    var_d = np.array([np.var(D[j, valid[j]]) if valid[j].any() else 0.0 for j in range(p)])
+    nu = np.maximum(nu, (noise_floor**2) * var_d * dt + 1e-300)
+    g2 = 2 * (1 - np.cos(2 * np.pi * f[None, :] * taus[:, None]))
+    a = g2 / nu[:, None]
+    den = (a**2).sum(0) + 1e-300
+    b = a / den                       # S_hat = sum_j b_j (P_j / nu_j - 1)
+    mu = b.sum(0)
+    detected = np.zeros(f.size, dtype=bool)
+    s_fine = None
+    for i, (hz, L) in enumerate(zip((resolution_hz, detection_hz), widths)):
+        Ps = uniform_filter1d(P, L, axis=-1, mode="nearest") if L > 1 else P
+        q = (b * Ps / nu[:, None]).sum(0)
+        var = (b**2 / shapes[:, i:i + 1]).sum(0)
+        n_tests = max(1.0, f[-1] / max(hz, df))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            thr = gamma.ppf(1 - false_alarm / (2 * n_tests), a=mu**2 / var, scale=var / mu)
+        detected |= np.nan_to_num(q > thr)
+        if s_fine is None:
+            s_fine = np.clip(q - mu, 0.0, None)
+    Ld = max(1, int(round(dilate_hz / df))) | 1
+    if Ld > 1:
+        detected = maximum_filter1d(detected.astype(np.uint8), Ld).astype(bool)
+    S = np.where(detected, s_fine, 0.0)
+    S[0] = 0.0
+    if n_fft % 2 == 0:
+        S[-1] = 0.0
+    return SpectralEstimate(freq=f, psd=S, noise_std=np.sqrt(nu / dt), detected=detected,
+                            n_fft=n_fft, dt=dt)
+
+
+@dataclass
+class Lines:
+    """Spectral lines: frequency (Hz), variance (rad²) and width (Hz) of each."""
+
+    frequency: np.ndarray
+    variance: np.ndarray
+    width: np.ndarray
+
+    def __len__(self) -> int:
+        return self.frequency.size
+
+
+def find_lines(spec: SpectralEstimate, *, max_lines: int = 32, min_separation_hz: float = 0.75,
+               min_fraction: float = 1e-4) -> Lines:
+    """Spectral lines of an estimated PSD.
+
+    Peaks of ``spec.psd`` at least ``min_separation_hz`` apart; each detected
+    bin is given to the nearest peak of its contiguous detected band; a line's
+    variance is its share of ``2 ∫ S df``, its frequency the power-weighted
+    centroid, its width the power-weighted standard deviation (Hz, at least one
+    bin).  Lines below ``min_fraction`` of the strongest are dropped, and at
+    most ``max_lines`` are kept (strongest first, returned sorted by frequency).
+    """
+    S, f = spec.psd, spec.freq
+    df = f[1] - f[0]
+    if not np.any(S > 0):
+        z = np.zeros(0)
+        return Lines(z, z, z)
+    peaks, _ = find_peaks(np.concatenate([[0.0], S, [0.0]]),
+                          distance=max(1, int(round(min_separation_hz / df))))
+    peaks = peaks - 1
+    peaks = peaks[S[peaks] > 0]
+    # contiguous bands of S > 0
+    pos = S > 0
+    band = np.cumsum(np.diff(np.concatenate([[0], pos.astype(int)])) == 1) * pos
+    bins = np.flatnonzero(pos)
+    pk_band = band[peaks]
+    owner = np.empty(bins.size, dtype=int)
+    for b_id in np.unique(band[bins]):
+        sel = band[bins] == b_id
+        cand = np.flatnonzero(pk_band == b_id)
+        if cand.size == 0:
+            cand = np.array([np.argmin(np.abs(peaks - bins[sel].mean()))])
+        d = np.abs(bins[sel][:, None] - peaks[cand][None, :])
+        owner[sel] = cand[np.argmin(d, axis=1)]
+    var = np.bincount(owner, weights=2 * S[bins] * df, minlength=peaks.size)
+    m1 = np.bincount(owner, weights=2 * S[bins] * df * f[bins], minlength=peaks.size)
+    m2 = np.bincount(owner, weights=2 * S[bins] * df * f[bins] ** 2, minlength=peaks.size)
+    keep = var > 0
+    freq = np.where(keep, m1 / np.where(keep, var, 1), 0)
+    width = np.sqrt(np.maximum(np.where(keep, m2 / np.where(keep, var, 1), 0) - freq**2, df**2))
+    keep &= var >= min_fraction * var.max()
+    idx = np.flatnonzero(keep)
+    idx = idx[np.argsort(var[idx])[::-1][:max_lines]]
+    idx = idx[np.argsort(freq[idx])]
+    return Lines(freq[idx], var[idx], width[idx])

@@ -1,0 +1,952 @@
+"""Multi-band ground reflectance textures: procedural (tileable) and orthoimage.
+
+Both classes share one interface::
+
+    tex.bands                                  # band names, e.g. ("blue", "green", "red", "nir", "pan")
+    tex.grid(x0_m, y0_m, texel_m, nx, ny)      # (nbands, ny, nx) float32 reflectance in [0, 1]
+    tex.land_cover(x, y)                       # uint8 class codes (LandCover)
+
+Texel (j, i) of ``grid`` is centred at ``(x0_m + (i + ½) texel_m, y0_m + (j + ½) texel_m)``
+(x along-track, y across-track, m), so a grid covers ``[x0, x0 + nx texel) × [y0, y0 + ny texel)``.
+Values are point samples at the texel centres (no area averaging).
+"""
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+from enum import IntEnum
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from . import _noise as nz
+from ._noise import Coords, Lookup, quantise, value_noise, lattice_interp, fbm_lattice, fbm_points
+
+__all__ = ["BAND_NAMES", "PAN_WEIGHTS", "LandCover", "ProceduralTexture", "OrthoTexture"]
+
+BAND_NAMES = ("blue", "green", "red", "nir", "pan")
+#: Pan = weighted mean of blue, green, red, nir (PHR pan ~480–830 nm).
+PAN_WEIGHTS = (0.15, 0.30, 0.30, 0.25)
+
+_F32 = np.float32
+
+
+class LandCover(IntEnum):
+    """Land-cover class codes returned by ``land_cover`` (uint8)."""
+
+    WATER = 0
+    CROPLAND = 1
+    FOREST = 2
+    GRASSLAND = 3
+    ROAD = 4
+    BUILDING = 5
+    URBAN_OPEN = 6   # yards, pavements, gardens, parks inside built-up areas
+    CLOUD = 7
+    UNKNOWN = 255
+
+
+# -----------------------------------------------------------------------------
+# Materials: surface reflectance (blue, green, red, nir)
+# -----------------------------------------------------------------------------
+_MATERIALS = [
+    ("deep_water", (0.045, 0.050, 0.030, 0.012)),
+    ("shallow_water", (0.060, 0.080, 0.060, 0.020)),
+    ("green_crop", (0.035, 0.075, 0.035, 0.480)),
+    ("mature_crop", (0.070, 0.110, 0.140, 0.320)),
+    ("light_soil", (0.110, 0.150, 0.200, 0.260)),
+    ("dark_soil", (0.060, 0.080, 0.100, 0.150)),
+    ("pasture", (0.045, 0.085, 0.055, 0.380)),
+    ("dry_grass", (0.080, 0.110, 0.130, 0.270)),
+    ("broadleaf_crown", (0.035, 0.070, 0.035, 0.420)),
+    ("conifer_crown", (0.025, 0.045, 0.025, 0.260)),
+    ("canopy_gap", (0.015, 0.025, 0.015, 0.100)),
+    ("shrub", (0.030, 0.055, 0.035, 0.250)),
+    ("concrete", (0.220, 0.240, 0.260, 0.280)),
+    ("asphalt", (0.090, 0.100, 0.110, 0.130)),
+    ("gravel", (0.170, 0.190, 0.220, 0.250)),
+    ("roof_grey", (0.260, 0.270, 0.280, 0.300)),
+    ("roof_tile", (0.070, 0.090, 0.200, 0.300)),
+    ("roof_dark", (0.070, 0.070, 0.080, 0.090)),
+    ("roof_white", (0.450, 0.470, 0.480, 0.470)),
+    ("pavement", (0.150, 0.160, 0.170, 0.190)),
+    ("lawn", (0.040, 0.080, 0.050, 0.400)),
+    ("hedge", (0.030, 0.060, 0.035, 0.350)),
+]
+_M = {name: k for k, (name, _) in enumerate(_MATERIALS)}
+_REFL = np.array([r for _, r in _MATERIALS], dtype=_F32).T.copy()   # (4, n_materials)
+_CLOUD_REFL = np.array([0.78, 0.79, 0.79, 0.76], dtype=_F32)
+#: Fraction of irradiance left in a shadow (diffuse sky light, bluish), per band.
+_SHADOW_K = np.array([0.40, 0.32, 0.27, 0.22], dtype=_F32)
+
+# Field parcel types: (veg material, soil material, base cover, row amplitude, furrow amplitude, class)
+_CROPS = [
+    ("green_crop", "light_soil", 0.75, 0.35, 0.00, LandCover.CROPLAND),
+    ("mature_crop", "light_soil", 0.85, 0.20, 0.00, LandCover.CROPLAND),
+    ("light_soil", "light_soil", 0.00, 0.00, 0.12, LandCover.CROPLAND),
+    ("dark_soil", "dark_soil", 0.00, 0.00, 0.20, LandCover.CROPLAND),
+    ("pasture", "dry_grass", 0.70, 0.00, 0.00, LandCover.CROPLAND),
+    ("pasture", "shrub", 0.55, 0.00, 0.00, LandCover.GRASSLAND),      # natural meadow
+    ("broadleaf_crown", "dry_grass", 0.40, 1.30, 0.00, LandCover.CROPLAND),  # orchard / vineyard
+    ("green_crop", "dark_soil", 0.55, 0.50, 0.00, LandCover.CROPLAND),  # young crop in rows
+]
+_CROP_P = np.array([0.22, 0.15, 0.13, 0.10, 0.15, 0.10, 0.07, 0.08])
+_CROP_BY_BYTE = np.searchsorted(np.cumsum(_CROP_P) / _CROP_P.sum() * 256, np.arange(256) + 0.5).astype(np.uint8)
+_CROP_M1 = np.array([_M[c[0]] for c in _CROPS], dtype=np.uint8)
+_CROP_M2 = np.array([_M[c[1]] for c in _CROPS], dtype=np.uint8)
+_CROP_A0 = np.array([c[2] for c in _CROPS], dtype=_F32)
+_CROP_AMP = np.array([c[3] for c in _CROPS], dtype=_F32)
+_CROP_FAMP = np.array([c[4] for c in _CROPS], dtype=_F32)
+_CROP_CLS = np.array([c[5] for c in _CROPS], dtype=np.uint8)
+_NSUB_BY_BYTE = np.array([1] * 180 + [2] * 30 + [3] * 24 + [4] * 14 + [6] * 8, dtype=_F32)
+
+# Forest stands: (crown, gap, base cover, fine-crown weight)
+_STANDS = [("broadleaf_crown", "canopy_gap", 0.65, 0.45), ("conifer_crown", "canopy_gap", 0.55, 0.8),
+           ("shrub", "light_soil", 0.45, 0.3)]
+_STAND_BY_BYTE = np.array([0] * 140 + [1] * 80 + [2] * 36, dtype=np.uint8)
+_STAND_M1 = np.array([_M[s[0]] for s in _STANDS], dtype=np.uint8)
+_STAND_M2 = np.array([_M[s[1]] for s in _STANDS], dtype=np.uint8)
+_STAND_A0 = np.array([s[2] for s in _STANDS], dtype=_F32)
+_STAND_W2 = np.array([s[3] for s in _STANDS], dtype=_F32)
+
+_ROOFS_SMALL = np.array([_M["roof_tile"]] * 5 + [_M["roof_grey"]] * 4 + [_M["roof_dark"]] * 3
+                        + [_M["roof_white"]] * 1 + [_M["roof_tile"]] * 3, dtype=np.uint8)
+_ROOFS_LARGE = np.array([_M["roof_grey"]] * 7 + [_M["roof_white"]] * 5 + [_M["roof_dark"]] * 4, dtype=np.uint8)
+
+# Macro (land-use) fields: fBm octaves (m) on a coarse 16-m node lattice
+_NODE_M = 16.0
+_OCT_WATER = ((4096, 2048, 1024, 512, 256), (1, .5, .25, .125, .0625))
+_OCT_URBAN = ((2400, 1200, 600, 300), (1, .5, .25, .125))
+_OCT_FOREST = ((2048, 1024, 512, 256, 128), (1, .55, .3, .16, .08))
+_OCT_DOMAIN = ((6000, 3000), (1, .5))
+_OCT_CLOUD = ((4096, 2048, 1024, 512, 256, 128), (1, .5, .25, .125, .0625, .03))
+_OCT_WROAD = ((1600, 800), (1, .4))
+
+_U8 = np.uint8
+import time as _time
+_TT = {}
+_last = [0.0, None]
+def _tick(name):
+    t = _time.perf_counter()
+    if _last[1] is not None:
+        _TT[_last[1]] = _TT.get(_last[1], 0) + t - _last[0]
+    _last[0] = t; _last[1] = name if name != 'end' else None
+
+
+def _check_fraction(name, v):
+    if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v <= 1):
+        raise ValueError(f"{name}: must be in [0, 1], got {v!r}")
+    return float(v)
+
+
+def _check_bands(bands) -> tuple:
+    if isinstance(bands, str):
+        bands = (bands,)
+    bands = tuple(bands)
+    if not bands:
+        raise ValueError("bands: must name at least one band")
+    for b in bands:
+        if b not in BAND_NAMES:
+            raise ValueError(f"bands: unknown band {b!r}; choose from {', '.join(BAND_NAMES)}")
+    if len(set(bands)) != len(bands):
+        raise ValueError(f"bands: repeated band in {bands}")
+    return bands
+
+
+def _check_grid_args(x0_m, y0_m, texel_m, nx, ny):
+    for name, v in (("x0_m", x0_m), ("y0_m", y0_m)):
+        if not math.isfinite(v):
+            raise ValueError(f"{name}: must be finite, got {v}")
+    if not (math.isfinite(texel_m) and texel_m > 0):
+        raise ValueError(f"texel_m: must be > 0, got {texel_m}")
+    for name, v in (("nx", nx), ("ny", ny)):
+        if int(v) != v or v < 1:
+            raise ValueError(f"{name}: must be a positive integer, got {v}")
+
+
+def _smooth(t):
+    return t * t * (_F32(3.0) - _F32(2.0) * t)
+
+
+def _clip01(a):
+    return np.clip(a, _F32(0.0), _F32(1.0), out=a)
+
+
+class ProceduralTexture:
+    """Deterministic, tileable multi-band reflectance of a synthetic landscape.
+
+    Reflectance is a pure function of absolute ground coordinates (hashed integer
+    lattices, value noise, jittered-grid parcels and blocks), so any window can be
+    generated on its own and tiles match bit for bit. The landscape has:
+    agricultural parcels (crops with row texture, bare soil with furrows, pasture,
+    orchards, hedge margins and gravel tracks), roads (main straight network of
+    bright concrete/asphalt, winding secondary roads), built-up areas (street grid,
+    houses with ridged roofs, large flat-roofed buildings, gardens, parks, and the
+    buildings' shadows on the anti-sun side), forest stands (tree-crown texture
+    with sun-side shading), texture-poor water (lakes / sea, dark and nearly
+    uniform) and optional clouds (bright, smooth, with their shadows).
+
+    Parameters
+    ----------
+    seed : int
+        Everything derives from it; same seed, same bytes.
+    bands : sequence of str
+        Output bands, in order, from ``BAND_NAMES``; ``pan`` is the
+        ``PAN_WEIGHTS`` mean of blue, green, red and nir.
+    water_fraction, cloud_fraction, urban_fraction, forest_fraction : float
+        Target area fractions in [0, 1] (water + urban + forest <= 1). They hold
+        on average over large areas (≫ 5 km); a 20 km scene deviates by tens of
+        percent of the target because land use varies on km scales.
+    field_size_m : float
+        Typical agricultural parcel size (m, > 10).
+    sun_elevation_deg, sun_azimuth_deg : float
+        Sun for building/cloud shadows and crown shading (deg; azimuth from +x toward +y).
+    texel_m : float
+        Nominal texel size (m) for the renderer; ``grid`` accepts any.
+    cloud_height_m : float
+        Cloud altitude above the ground for cloud shadows (m, > 0).
+    workers : int, optional
+        Threads used by ``grid`` (default: CPU count, at most 8).
+    """
+
+    def __init__(self, *, seed: int = 0, bands: Sequence[str] = BAND_NAMES, water_fraction: float = 0.05,
+                 cloud_fraction: float = 0.0, urban_fraction: float = 0.08, forest_fraction: float = 0.25,
+                 field_size_m: float = 200.0, sun_elevation_deg: float = 45.0, sun_azimuth_deg: float = 135.0,
+                 texel_m: float = 1.0, cloud_height_m: float = 1500.0, workers: int | None = None):
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+            raise ValueError(f"seed: must be an integer, got {seed!r}")
+        self.seed = int(seed)
+        self.bands = _check_bands(bands)
+        self.water_fraction = _check_fraction("water_fraction", water_fraction)
+        self.cloud_fraction = _check_fraction("cloud_fraction", cloud_fraction)
+        self.urban_fraction = _check_fraction("urban_fraction", urban_fraction)
+        self.forest_fraction = _check_fraction("forest_fraction", forest_fraction)
+        if self.water_fraction + self.urban_fraction + self.forest_fraction > 1 + 1e-9:
+            raise ValueError("forest_fraction: water_fraction + urban_fraction + forest_fraction must be <= 1, got "
+                             f"{self.water_fraction + self.urban_fraction + self.forest_fraction:g}")
+        if not (math.isfinite(field_size_m) and field_size_m > 10):
+            raise ValueError(f"field_size_m: must be > 10, got {field_size_m}")
+        if not (math.isfinite(sun_elevation_deg) and 0 < sun_elevation_deg <= 90):
+            raise ValueError(f"sun_elevation_deg: must be in (0, 90], got {sun_elevation_deg}")
+        if not math.isfinite(sun_azimuth_deg):
+            raise ValueError(f"sun_azimuth_deg: must be finite, got {sun_azimuth_deg}")
+        if not (math.isfinite(texel_m) and texel_m > 0):
+            raise ValueError(f"texel_m: must be > 0, got {texel_m}")
+        if not (math.isfinite(cloud_height_m) and cloud_height_m > 0):
+            raise ValueError(f"cloud_height_m: must be > 0, got {cloud_height_m}")
+        if workers is None:
+            workers = min(8, os.cpu_count() or 1)
+        if int(workers) != workers or workers < 1:
+            raise ValueError(f"workers: must be a positive integer, got {workers}")
+        self.field_size_m = float(field_size_m)
+        self.sun_elevation_deg = float(sun_elevation_deg)
+        self.sun_azimuth_deg = float(sun_azimuth_deg)
+        self.texel_m = float(texel_m)
+        self.cloud_height_m = float(cloud_height_m)
+        self.workers = int(workers)
+        self._setup()
+
+    def __repr__(self) -> str:
+        return (f"ProceduralTexture(seed={self.seed}, bands={self.bands}, water_fraction={self.water_fraction}, "
+                f"cloud_fraction={self.cloud_fraction}, urban_fraction={self.urban_fraction}, "
+                f"forest_fraction={self.forest_fraction}, field_size_m={self.field_size_m})")
+
+    # -- set-up ----------------------------------------------------------------
+    def _setup(self):
+        s = self.seed & 0xFFFFFFFF
+        salts = nz.unit(nz.hash2(np.arange(32), np.full(32, s), 0x5EED)) * _F32(2 ** 24)
+        self._salt = [int(v) * 97 + k for k, v in enumerate(salts)]
+        r = nz.unit(nz.hash2(np.arange(8), np.full(8, s), 0xA11)).astype(np.float64)
+        self._theta = 2 * math.pi * r[0]                           # urban grid / main roads / field domain A
+        self._theta_b = self._theta + math.radians(20 + 50 * r[1])  # field domain B
+        self._cu, self._su = _F32(math.cos(self._theta)), _F32(math.sin(self._theta))
+        self._cb, self._sb = _F32(math.cos(self._theta_b)), _F32(math.sin(self._theta_b))
+        e = math.radians(self.sun_elevation_deg)
+        a = math.radians(self.sun_azimuth_deg)
+        self._tan_e = math.tan(e)
+        self._sun_xy = (math.cos(a), math.sin(a))
+        # sun horizontal direction in the urban (u, v) frame
+        self._sun_uv = (math.cos(a - self._theta), math.sin(a - self._theta))
+        # layout sizes
+        self._Sv = 0.8 * self.field_size_m        # strip spacing
+        self._Lu, self._Lv, self._nlu, self._nlv, self._Wst = 24.0, 20.0, 4, 2, 12.0
+        self._Bu = self._nlu * self._Lu + self._Wst
+        self._Bv = self._nlv * self._Lv + self._Wst
+        self._Sr = 1300.0                         # main road spacing
+        self._hmax = 28.0                         # tallest building (m)
+        # neighbouring lots (toward the sun) whose shadows can reach a texel
+        lmax = self._hmax / self._tan_e
+        self._na = int(math.ceil(lmax * abs(self._sun_uv[0]) / self._Lu)) + 1
+        self._nb = int(math.ceil(lmax * abs(self._sun_uv[1]) / self._Lv)) + 1
+        self._macro = {
+            "water": fbm_lattice(_NODE_M, *_OCT_WATER, self._salt[0]),
+            "forest": fbm_lattice(_NODE_M, *_OCT_FOREST, self._salt[1]),
+            "domain": fbm_lattice(_NODE_M, *_OCT_DOMAIN, self._salt[2]),
+            "cloud": fbm_lattice(_NODE_M, *_OCT_CLOUD, self._salt[3]),
+            "wroad": self._wroad_lattice(),
+        }
+        self._calibrate()
+
+    def _wroad_lattice(self):
+        """Node function: signed distance (m) to the zero contour of a low-frequency fBm."""
+        node_q = int(round(_NODE_M * nz.QUANTA_PER_M))
+        h_q = 2 * nz.QUANTA_PER_M
+        salt = self._salt[4]
+
+        def fn(ix, iy):
+            ix, iy = np.broadcast_arrays(np.asarray(ix, np.int64), np.asarray(iy, np.int64))
+            qx, qy = ix * node_q, iy * node_q
+            n0 = fbm_points(qx, qy, *_OCT_WROAD, salt)
+            gx = (fbm_points(qx + h_q, qy, *_OCT_WROAD, salt) - fbm_points(qx - h_q, qy, *_OCT_WROAD, salt)) / _F32(4.0)
+            gy = (fbm_points(qx, qy + h_q, *_OCT_WROAD, salt) - fbm_points(qx, qy - h_q, *_OCT_WROAD, salt)) / _F32(4.0)
+            g = np.sqrt(gx * gx + gy * gy) + _F32(1e-9)
+            return np.clip(n0 / g, _F32(-1e4), _F32(1e4))
+        return fn
+
+    def _calibrate(self):
+        """Thresholds on the macro fields that give the requested area fractions."""
+        rng = np.random.default_rng([self.seed & 0xFFFFFFFF, 7])
+        n = 60000
+        qx = quantise(rng.uniform(-2e5, 2e5, n))
+        qy = quantise(rng.uniform(-2e5, 2e5, n))
+        nw = fbm_points(qx, qy, *_OCT_WATER, self._salt[0])
+        nu = fbm_points(qx, qy, *_OCT_URBAN, self._salt[5])
+        nf = fbm_points(qx, qy, *_OCT_FOREST, self._salt[1])
+        wf, uf, ff = self.water_fraction, self.urban_fraction, self.forest_fraction
+        inf = np.float32(np.inf)
+        self._t_water = _F32(np.quantile(nw, wf)) if 0 < wf < 1 else (-inf if wf == 0 else inf)
+        land = nw >= self._t_water
+        self._t_shore = _F32(self._t_water + 0.03) if wf > 0 else -inf
+        if uf > 0 and land.any():
+            q = 1 - min(1.0, uf / max(1e-9, 1 - wf))
+            self._t_urban = _F32(np.quantile(nu[land], q)) if q > 0 else -inf
+        else:
+            self._t_urban = inf
+        rest = land & (nu <= self._t_urban)
+        if ff > 0 and rest.any():
+            q = 1 - min(1.0, ff / max(1e-9, 1 - wf - uf))
+            self._t_forest = _F32(np.quantile(nf[rest], q)) if q > 0 else -inf
+        else:
+            self._t_forest = inf
+        cf = self.cloud_fraction
+        if cf > 0:
+            nc = fbm_points(qx, qy, *_OCT_CLOUD, self._salt[3])
+            self._t_cloud = _F32(np.quantile(nc, 1 - cf)) if cf < 1 else -inf
+        else:
+            self._t_cloud = inf
+
+    # -- public API ------------------------------------------------------------
+    def grid(self, x0_m: float, y0_m: float, texel_m: float, nx: int, ny: int) -> np.ndarray:
+        """Reflectance on a regular texel grid.
+
+        Parameters
+        ----------
+        x0_m, y0_m : float
+            Lower corner of the grid (m); texel (j, i) is centred at
+            ``(x0_m + (i + ½) texel_m, y0_m + (j + ½) texel_m)``.
+        texel_m : float
+            Texel size (m, > 0).
+        nx, ny : int
+            Number of texels along x and y.
+
+        Returns
+        -------
+        ndarray (nbands, ny, nx) float32
+            Reflectance in [0, 1], bands in ``self.bands`` order. A texel's value
+            depends only on its centre (to 1/1024 m), so tiles offset by whole
+            texels reproduce a big block exactly.
+        """
+        _check_grid_args(x0_m, y0_m, texel_m, nx, ny)
+        nx, ny = int(nx), int(ny)
+        qx = quantise(x0_m + (np.arange(nx) + 0.5) * texel_m)[None, :]
+        qy = quantise(y0_m + (np.arange(ny) + 0.5) * texel_m)[:, None]
+        out = np.empty((len(self.bands), ny, nx), dtype=_F32)
+        # square-ish tiles keep the per-tile lookup tables (rotated layouts) small
+        tw = min(nx, 512)
+        th = min(ny, max(16, 262144 // tw))
+        chunks = [(j, min(ny, j + th), i, min(nx, i + tw)) for j in range(0, ny, th) for i in range(0, nx, tw)]
+
+        def work(c):
+            j0, j1, i0, i1 = c
+            _, refl = self._evaluate(Coords(qx[:, i0:i1], qy[j0:j1], True), want_bands=True)
+            out[:, j0:j1, i0:i1] = refl
+
+        if self.workers > 1 and len(chunks) > 1:
+            with ThreadPoolExecutor(max_workers=min(self.workers, len(chunks))) as ex:
+                list(ex.map(work, chunks))
+        else:
+            for c in chunks:
+                work(c)
+        return out
+
+    def land_cover(self, x, y) -> np.ndarray:
+        """Land-cover class (``LandCover`` codes, uint8) at ground points (m).
+
+        Clouds are reported as ``CLOUD`` where their opacity exceeds ½. At texel
+        centres this equals the classes behind :meth:`grid`.
+        """
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        x, y = np.broadcast_arrays(x, y)
+        shape = x.shape
+        if x.size == 0:
+            return np.zeros(shape, dtype=_U8)
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+            raise ValueError("x, y: must be finite")
+        c = Coords(quantise(x.ravel()), quantise(y.ravel()), False)
+        cls, _ = self._evaluate(c, want_bands=False)
+        return cls.reshape(shape)
+
+    def land_cover_grid(self, x0_m: float, y0_m: float, texel_m: float, nx: int, ny: int) -> np.ndarray:
+        """Land-cover classes on the texel grid of :meth:`grid`, shape (ny, nx) uint8."""
+        _check_grid_args(x0_m, y0_m, texel_m, nx, ny)
+        qx = quantise(x0_m + (np.arange(int(nx)) + 0.5) * texel_m)[None, :]
+        qy = quantise(y0_m + (np.arange(int(ny)) + 0.5) * texel_m)[:, None]
+        cls, _ = self._evaluate(Coords(qx, qy, True), want_bands=False)
+        return cls
+
+    # -- the landscape ---------------------------------------------------------
+    def _macro_field(self, c: Coords, name: str) -> np.ndarray:
+        return lattice_interp(c, _NODE_M, self._macro[name], smooth=False, table=True)
+
+    def _block_code(self, bu, bv):
+        """Urban block code: 0 not built-up, 1 residential, 2 large buildings, 3 park."""
+        bu, bv = np.broadcast_arrays(np.asarray(bu, np.int64), np.asarray(bv, np.int64))
+        uc = (bu + 0.5) * self._Bu
+        vc = (bv + 0.5) * self._Bv
+        ct, st = math.cos(self._theta), math.sin(self._theta)
+        qx = quantise(ct * uc - st * vc)
+        qy = quantise(st * uc + ct * vc)
+        nu = fbm_points(qx, qy, *_OCT_URBAN, self._salt[5])
+        nw = fbm_points(qx, qy, *_OCT_WATER, self._salt[0])
+        urban = (nu > self._t_urban) & (nw > self._t_water + _F32(0.04))
+        t = nz.unit(nz.hash2(bu, bv, self._salt[6]))
+        code = np.where(t < 0.62, 1, np.where(t < 0.85, 2, 3)).astype(_U8)
+        return np.where(urban, code, 0).astype(_U8)
+
+    def _building(self, gu, gv, blocks: Lookup):
+        """Building of lot (gu, gv): (u0, u1, v0, v1, height, roof material, present), u/v in m."""
+        nlu, nlv = self._nlu, self._nlv
+        bu = gu // nlu
+        bv = gv // nlv
+        ku = gu - bu * nlu
+        kv = gv - bv * nlv
+        code = blocks.take(0, blocks.index(bu, bv))
+        h = nz.hash2(gu, gv, self._salt[7])
+        b0 = (h & 0xFF).astype(_F32) * _F32(1 / 255)
+        b1 = ((h >> 8) & 0xFF).astype(_F32) * _F32(1 / 255)
+        b2 = ((h >> 16) & 0xFF).astype(_F32) * _F32(1 / 255)
+        b3 = (h >> 24).astype(np.intp)
+        lu0 = (bu * self._Bu + self._Wst + ku * self._Lu).astype(_F32)
+        lv0 = (bv * self._Bv + self._Wst + kv * self._Lv).astype(_F32)
+        large = code == 2
+        # residential: a house inset in its lot
+        u0 = lu0 + _F32(2.0) + _F32(6.0) * b0
+        u1 = lu0 + _F32(self._Lu - 2.0) - _F32(6.0) * b1
+        v0 = lv0 + _F32(2.0) + _F32(4.0) * b1
+        v1 = lv0 + _F32(self._Lv - 2.0) - _F32(5.0) * b2
+        hgt = _F32(3.0) + _F32(9.0) * b2
+        roof = _ROOFS_SMALL[b3 % _ROOFS_SMALL.size]
+        present = (code == 1) & (b0 < _F32(0.88))
+        if np.any(large):
+            bu0 = (bu * self._Bu + self._Wst).astype(_F32)
+            bv0 = (bv * self._Bv + self._Wst).astype(_F32)
+            hb = nz.hash2(bu, bv, self._salt[8])
+            c0 = (hb & 0xFF).astype(_F32) * _F32(1 / 255)
+            c1 = ((hb >> 8) & 0xFF).astype(_F32) * _F32(1 / 255)
+            u0 = np.where(large, bu0 + _F32(3.0) + _F32(6.0) * c0, u0)
+            u1 = np.where(large, bu0 + _F32(self._Bu - self._Wst - 3.0) - _F32(8.0) * c1, u1)
+            v0 = np.where(large, bv0 + _F32(3.0) + _F32(4.0) * c1, v0)
+            v1 = np.where(large, bv0 + _F32(self._Bv - self._Wst - 3.0) - _F32(4.0) * c0, v1)
+            hgt = np.where(large, _F32(8.0) + _F32(self._hmax - 8.0) * c1 * c1, hgt)
+            roof = np.where(large, _ROOFS_LARGE[(hb >> 24).astype(np.intp) % _ROOFS_LARGE.size], roof)
+            present = present | large
+        return u0, u1, v0, v1, hgt, roof, present
+
+    # lattice functions of the layout (elementwise in their integer arguments)
+    def _strip_b(self, k2, _j=None):
+        """Lower boundary (m, in the field frame) of strip k2 = 2 k + domain."""
+        k2 = np.asarray(k2, np.int64)
+        k = k2 >> 1
+        h = nz.unit(nz.hash2(k, k2 & 1, self._salt[14])).astype(np.float64)
+        return (k * self._Sv + 0.8 * self._Sv * (h - 0.5)).astype(_F32)
+
+    def _track_flag(self, k2, _j=None):
+        return (nz.unit(nz.hash2(k2, 3, self._salt[16])) < _F32(0.3)).astype(_U8)
+
+    def _strip_su(self, k2, _j=None):
+        """Nominal parcel length (m) and column offset (fraction) in strip k2."""
+        return _F32(self.field_size_m * 0.7) + _F32(self.field_size_m * 1.5) * nz.unit(nz.hash2(k2, 1, self._salt[15]))
+
+    def _strip_off(self, k2, _j=None):
+        return nz.unit(nz.hash2(k2, 2, self._salt[15]))
+
+    def _col_b(self, m, k2):
+        """Lower boundary (m, shifted field frame) of parcel m in strip k2."""
+        su = self._strip_su(k2).astype(np.float64)
+        h = nz.unit(nz.hash2(m, k2, self._salt[15] + 3)).astype(np.float64)
+        return (np.asarray(m, np.int64) * su + 0.8 * su * (h - 0.5)).astype(_F32)
+
+    def _parcel_hash(self, m, k2):
+        """64 random bits per parcel."""
+        h = nz.hash2(m, k2, self._salt[17])
+        return (h.astype(np.uint64) << np.uint64(32)) | nz.rehash(h, 5).astype(np.uint64)
+
+    def _road_pos(self, k, d):
+        h = nz.unit(nz.hash2(k, d, self._salt[18])).astype(np.float64)
+        return (np.asarray(k, np.int64) * self._Sr + 0.3 * self._Sr * (h - 0.5)).astype(_F32)
+
+    def _road_hw(self, k, seg, d):
+        h = nz.hash3(k, seg, d, self._salt[18] + 1)
+        present = nz.unit(h) < _F32(0.6)
+        hw = _F32(2.5) + _F32(2.5) * nz.unit(nz.rehash(h, 1))
+        return np.where(present, hw, _F32(0.0))
+
+    def _evaluate(self, c: Coords, *, want_bands: bool):
+        shape = c.shape
+        n = int(np.prod(shape))
+        x, y = c.x, c.y
+        S = self._salt
+        i32 = np.intp  # index arrays: intp gathers are several times faster than int32
+        _tick('noise')
+        # ---- noise fields shared by the classes (values in ~[-1, 1]) -----------
+        n2 = value_noise(c, 2.0, S[10])
+        n5 = value_noise(c, 5.0, S[11])
+        n12 = value_noise(c, 12.0, S[12])
+        n40 = value_noise(c, 40.0, S[13])
+        nw = self._macro_field(c, "water")
+        nf = self._macro_field(c, "forest")
+        nd = self._macro_field(c, "domain")
+        _tick('frames')
+        # ---- frames ----------------------------------------------------------
+        u = self._cu * x + self._su * y
+        v = self._cu * y - self._su * x
+        domb = nd > _F32(0.0)
+        uf = np.where(domb, self._cb * x + self._sb * y, u)
+        vf = np.where(domb, self._cb * y - self._sb * x, v)
+
+        _tick('agricultural')
+        # ---- agricultural parcels (default land) ------------------------------
+        # strips along the field frame's u axis, jittered boundaries b(k) in v
+        kn = np.floor(vf * _F32(1.0 / self._Sv) + _F32(0.5)).astype(i32)
+        kn *= 2
+        kn += domb                                  # key = 2 k + domain
+        strips = Lookup.around([self._strip_b, self._track_flag, self._strip_su, self._strip_off],
+                               kn, 0, n, margin_i=4)
+        ik = strips.index(kn, 0)
+        bn = strips.take(0, ik)
+        below = vf < bn
+        ik = strips.shift_i(ik, -2 * below.astype(i32))   # strip index of the texel
+        ks = kn - 2 * below.astype(i32)
+        ik_hi = strips.shift_i(ik, 2)
+        lo = strips.take(0, ik)
+        hi = strips.take(0, ik_hi)
+        su = strips.take(2, ik)
+        up = uf + strips.take(3, ik) * su
+        # parcels along each strip, jittered boundaries c(m) in u
+        _tick('agri0')
+        mn = np.floor(up / su + _F32(0.5)).astype(i32)
+        cols = Lookup.around([self._col_b, self._parcel_hash], mn, ks, n, margin_i=2)
+        ic = cols.index(mn, ks)
+        left = up < cols.take(0, ic)
+        ic = cols.shift_i(ic, -left.astype(i32))
+        ulo = cols.take(0, ic)
+        uhi = cols.take(0, cols.shift_i(ic, 1))
+        hp = cols.take(1, ic)
+        _tick('agri1')
+        du = np.minimum(up - ulo, uhi - up)
+        dv = np.minimum(vf - lo, hi - vf)
+        nsub = _NSUB_BY_BYTE[((hp >> 8) & 0xFF).astype(np.intp)]
+        sub = np.minimum(np.floor((up - ulo) / (uhi - ulo) * nsub), nsub - _F32(1.0)).astype(np.intp)
+        sub *= 97
+        sub += (hp & 0xFF).astype(np.intp)
+        sub &= 0xFF
+        ctype = _CROP_BY_BYTE[sub]
+        _tick('agri2')
+        period = _F32(3.0) + ((hp >> 16) & 0xFF).astype(_F32) * _F32(9.0 / 255)
+        along_u = (hp & 0x01000000) != 0
+        w = np.where(along_u, up, vf)
+        w /= period
+        tri = w - np.floor(w)
+        tri -= _F32(0.5)
+        np.abs(tri, out=tri)
+        tri *= _F32(4.0)
+        tri -= _F32(1.0)                             # triangle wave in [-1, 1]
+        _tick('agri3')
+        alpha = _CROP_A0[ctype] + _CROP_AMP[ctype] * tri + _F32(0.15) * n40 + _F32(0.08) * n5
+        _clip01(alpha)
+        gain = _CROP_FAMP[ctype] * tri
+        gain += _F32(1.0)
+        gain += _F32(0.03) * n2 + _F32(0.04) * n12
+        gain *= _F32(0.9) + ((hp >> 40) & 0xFF).astype(_F32) * _F32(0.2 / 255)
+        _tick('agri4')
+        m1 = _CROP_M1[ctype]
+        m2 = _CROP_M2[ctype]
+        cls = _CROP_CLS[ctype]
+        # margins (hedges / grass strips) and gravel tracks on some strip boundaries
+        _tick('agri5')
+        wmarg = _F32(0.6) + ((hp >> 26) & 0x3).astype(_F32) * _F32(0.6)
+        margin = np.minimum(du, dv) < wmarg
+        if np.any(margin):
+            hedge = margin & ((hp & 0x02000000) != 0)
+            m1[margin] = _M["dry_grass"]
+            m2[margin] = _M["pasture"]
+            m1[hedge] = _M["hedge"]
+            alpha[margin] = _F32(0.5)
+        _tick('agri6')
+        track = ((strips.take(1, ik) != 0) & (vf - lo < _F32(1.7))) | \
+                ((strips.take(1, ik_hi) != 0) & (hi - vf < _F32(1.7)))
+
+        _tick('water')
+        # ---- water, shores, built-up blocks, forest --------------------------------
+        water = nw + _F32(0.012) * n12 < self._t_water
+        shore = ~water & (nw < self._t_shore)
+        bu = np.floor(u * _F32(1.0 / self._Bu)).astype(i32)
+        bv = np.floor(v * _F32(1.0 / self._Bv)).astype(i32)
+        blocks = Lookup.around([self._block_code], bu, bv, n, margin_i=self._na // self._nlu + 2,
+                               margin_j=self._nb // self._nlv + 2)
+        bcode = blocks.take(0, blocks.index(bu, bv))
+        urban = (bcode > 0) & ~water
+        forest = nf + _F32(0.04) * n12 > self._t_forest
+        forest &= ~water & ~urban & ~shore
+        if np.any(forest):
+            fidx = np.nonzero(forest)
+            stand = _STAND_BY_BYTE[((hp[fidx] >> 32) & 0xFF).astype(np.intp)]
+            dx, dy = 1.5 * self._sun_xy[0], 1.5 * self._sun_xy[1]
+            n5f, n2f, n12f = n5[fidx], n2[fidx], n12[fidx]
+            n5s = value_noise(c.shifted(dx, dy), 5.0, S[11])[fidx]
+            crown = n5f + _STAND_W2[stand] * n2f
+            alpha[fidx] = np.clip(_STAND_A0[stand] + _F32(1.1) * crown + _F32(0.2) * n12f, _F32(0), _F32(1))
+            gain[fidx] = (_F32(1.0) + _F32(1.2) * (n5f - n5s)) * (_F32(1.0) + _F32(0.06) * n40[fidx])
+            m1[fidx] = _STAND_M1[stand]
+            m2[fidx] = _STAND_M2[stand]
+            cls[fidx] = LandCover.FOREST
+        if np.any(shore):                            # natural banks around water
+            m1[shore] = _M["pasture"]
+            m2[shore] = _M["shrub"]
+            alpha[shore] = np.clip(_F32(0.5) + _F32(0.8) * n5[shore] + _F32(0.3) * n12[shore], _F32(0), _F32(1))
+            cls[shore] = LandCover.GRASSLAND
+
+        _tick('roads')
+        # ---- roads -------------------------------------------------------------
+        road = track.copy()
+        bright = track.copy()
+        for d, a_coord, b_coord in ((0, u, v), (1, v, u)):
+            kr = np.floor(a_coord * _F32(1.0 / self._Sr) + _F32(0.5)).astype(i32)
+            seg = np.floor(b_coord * _F32(1.0 / self._Sr)).astype(i32)
+            look = Lookup.around([lambda k, s, d=d: self._road_pos(k, d), lambda k, s, d=d: self._road_hw(k, s, d)],
+                                 kr, seg, n)
+            ir = look.index(kr, seg)
+            dist = a_coord - look.take(0, ir)
+            np.abs(dist, out=dist)
+            on = dist < look.take(1, ir)
+            road |= on
+            on &= (kr & 1) == 0
+            bright |= on
+        winding = np.abs(self._macro_field(c, "wroad")) < _F32(2.6)
+        road |= winding
+        bright |= winding
+        road &= ~water
+        road &= ~urban
+        if np.any(road):
+            ridx = np.nonzero(road)
+            m1[ridx] = np.where(bright[ridx], np.where(track[ridx], _U8(_M["gravel"]), _U8(_M["concrete"])),
+                                _U8(_M["asphalt"]))
+            alpha[ridx] = _F32(1.0)
+            gain[ridx] = _F32(1.0) + _F32(0.04) * n2[ridx]
+            cls[ridx] = LandCover.ROAD
+
+        shadow = None
+        if np.any(urban):
+            shadow = np.zeros(shape, dtype=_F32)
+            _tick('urban')
+            self._urban(urban, u, v, bu, bv, bcode, blocks, n2, n5, n12, m1, m2, alpha, gain, shadow, cls,
+                        want_shadows=want_bands)
+
+        _tick('water')
+        # ---- water (dark, nearly uniform; a little brighter near the shore) -------
+        if np.any(water):
+            widx = np.nonzero(water)
+            m1[widx] = _M["shallow_water"]
+            m2[widx] = _M["deep_water"]
+            alpha[widx] = np.clip((nw[widx] - self._t_water) * _F32(12.0) + _F32(0.6), _F32(0), _F32(0.6))
+            gain[widx] = _F32(1.0) + _F32(0.01) * n40[widx]
+            cls[widx] = LandCover.WATER
+
+        _tick('clouds')
+        # ---- clouds (smooth, bright) and their shadows ---------------------------
+        cloud = cshadow = cloud_bright = None
+        if self.cloud_fraction > 0:
+            nc = self._macro_field(c, "cloud")
+            cloud = _smooth(np.clip((nc - self._t_cloud) * _F32(5.0) + _F32(0.5), _F32(0), _F32(1)))
+            L = self.cloud_height_m / self._tan_e
+            ncs = self._macro_field(c.shifted(L * self._sun_xy[0], L * self._sun_xy[1]), "cloud")
+            cshadow = _smooth(np.clip((ncs - self._t_cloud) * _F32(5.0) + _F32(0.5), _F32(0), _F32(1)))
+            cls[cloud >= _F32(0.5)] = LandCover.CLOUD
+            cloud_bright = _F32(0.88) + _F32(0.12) * np.clip((nc - self._t_cloud) * _F32(2.0), _F32(0), _F32(1))
+
+        _tick('end')
+        if not want_bands:
+            return cls, None
+
+        _tick('reflectance')
+        # ---- reflectance per band ----------------------------------------------
+        i1 = m1.astype(np.intp)
+        i2 = m2.astype(np.intp)
+        beta = _F32(1.0) - alpha
+        vis_nir = []
+        for b in range(4):
+            t = _REFL[b]
+            r = t[i1]
+            r *= alpha
+            r += t[i2] * beta
+            r *= gain
+            k = _SHADOW_K[b]
+            if shadow is not None:
+                r *= _F32(1.0) - shadow * (_F32(1.0) - k)
+            if cloud is not None:
+                r *= _F32(1.0) - _F32(0.85) * cshadow * (_F32(1.0) - k)
+                r += (_CLOUD_REFL[b] * cloud_bright - r) * cloud
+            vis_nir.append(_clip01(r))
+        out = np.empty((len(self.bands),) + shape, dtype=_F32)
+        for o, name in enumerate(self.bands):
+            if name == "pan":
+                p = out[o]
+                np.multiply(vis_nir[0], _F32(PAN_WEIGHTS[0]), out=p)
+                for b in range(1, 4):
+                    p += vis_nir[b] * _F32(PAN_WEIGHTS[b])
+            else:
+                out[o] = vis_nir[BAND_NAMES.index(name)]
+        _tick('end')
+        return cls, out
+
+    def _urban(self, urban, u, v, bu, bv, bcode, blocks, n2, n5, n12, m1, m2, alpha, gain, shadow, cls, *,
+               want_shadows=True):
+        """Streets, lots, buildings, gardens, parks and building shadows (in place, on the urban texels)."""
+        idx = np.nonzero(urban)
+        pu, pv = u[idx], v[idx]
+        gbu, gbv, code = bu[idx], bv[idx], bcode[idx]
+        n2u, n5u, n12u = n2[idx], n5[idx], n12[idx]
+        Wst, Lu, Lv = _F32(self._Wst), _F32(self._Lu), _F32(self._Lv)
+        ru = pu - (gbu * self._Bu).astype(_F32)
+        rv = pv - (gbv * self._Bv).astype(_F32)
+        ku = np.minimum(np.floor((ru - Wst) / Lu).astype(np.intp), self._nlu - 1)
+        kv = np.minimum(np.floor((rv - Wst) / Lv).astype(np.intp), self._nlv - 1)
+        gu = gbu * self._nlu + ku      # lot indices (a street texel gets the lot before the street)
+        gv = gbv * self._nlv + kv
+        street = (ru < Wst) | (rv < Wst)
+        n = pu.size
+        # streets: asphalt carriageway with pavements along the kerbs
+        kerb = _F32(2.2)
+        lane = ((ru >= kerb) & (ru <= Wst - kerb)) | ((rv >= kerb) & (rv <= Wst - kerb))
+        M1 = np.where(lane, _U8(_M["asphalt"]), _U8(_M["pavement"]))
+        M2 = M1.copy()
+        A = np.ones(n, _F32)
+        G = _F32(1.0) + _F32(0.04) * n2u
+        C = np.full(n, LandCover.ROAD, _U8)
+        # lots: gardens / yards and trees; parks
+        lot = ~street
+        garden = nz.unit(nz.hash2(gu, gv, self._salt[9])) * _F32(0.9)
+        park = code == 3
+        green = (_F32(0.5) + _F32(0.5) * n12u) < garden + park.astype(_F32)
+        tree = lot & (n5u > np.where(park, _F32(0.15), _F32(0.55))) & (green | park)
+        M1[lot] = np.where(green[lot], _U8(_M["lawn"]), _U8(_M["pavement"]))
+        M2[lot] = _M["dry_grass"]
+        A[lot] = np.where(green[lot], _F32(0.85), _F32(1.0))
+        C[lot] = LandCover.URBAN_OPEN
+        M1[tree] = _M["broadleaf_crown"]
+        M2[tree] = _M["canopy_gap"]
+        A[tree] = np.clip(_F32(0.4) + _F32(1.5) * (n5u[tree] - _F32(0.5)) + _F32(0.5) * n2u[tree], _F32(0), _F32(1))
+        # the lot's own building: ridged roofs for houses, flat roofs for large buildings
+        na, nb = self._na, self._nb
+        lots = Lookup.around([lambda i, j: self._building(i, j, blocks)], gu, gv, n, margin_i=na, margin_j=nb)
+        il = lots.index(gu, gv)
+        u0, u1, v0, v1 = (lots.take(k, il) for k in range(4))
+        roof, present = lots.take(5, il), lots.take(6, il)
+        onroof = lot & present & (pu >= u0) & (pu < u1) & (pv >= v0) & (pv < v1)
+        M1[onroof] = roof[onroof]
+        M2[onroof] = roof[onroof]
+        A[onroof] = 1.0
+        su, sv = _F32(self._sun_uv[0]), _F32(self._sun_uv[1])
+        ridge_along_v = (u1 - u0) < (v1 - v0)      # the ridge runs along the long side
+        facing = np.where(ridge_along_v, (pu - _F32(0.5) * (u0 + u1)) * su, (pv - _F32(0.5) * (v0 + v1)) * sv) > 0
+        ridge_g = np.where(facing, _F32(1.12), _F32(0.82))
+        G = np.where(onroof, np.where(code == 2, _F32(1.0) + _F32(0.03) * n2u, ridge_g), G)
+        C[onroof] = LandCover.BUILDING
+        # shadows cast on the ground by this and neighbouring buildings (anti-sun side)
+        if not want_shadows:
+            na = nb = -1
+        sgu = 1 if self._sun_uv[0] >= 0 else -1
+        sgv = 1 if self._sun_uv[1] >= 0 else -1
+        isu = _F32(1.0 / (su if abs(su) > 1e-6 else 1e-6))
+        isv = _F32(1.0 / (sv if abs(sv) > 1e-6 else 1e-6))
+        ground = ~onroof
+        sh = np.zeros(n, dtype=bool)
+        inv_tan = _F32(1.0 / self._tan_e)
+        for a in range(na + 1):
+            for b in range(nb + 1):
+                ic = lots.index(gu + a * sgu, gv + b * sgv)
+                cu0, cu1, cv0, cv1, ch, cp = (lots.take(k, ic) for k in (0, 1, 2, 3, 4, 6))
+                ta = (cu0 - pu) * isu
+                tb = (cu1 - pu) * isu
+                tc = (cv0 - pv) * isv
+                td = (cv1 - pv) * isv
+                t_lo = np.maximum(np.maximum(np.minimum(ta, tb), np.minimum(tc, td)), _F32(0.0))
+                t_hi = np.minimum(np.minimum(np.maximum(ta, tb), np.maximum(tc, td)), ch * inv_tan)
+                sh |= cp & (t_lo <= t_hi)
+        sh &= ground
+        m1[idx] = M1
+        m2[idx] = M2
+        alpha[idx] = A
+        gain[idx] = G
+        shadow[idx] = sh.astype(_F32)
+        cls[idx] = C
+
+# -----------------------------------------------------------------------------
+# Orthoimage
+# -----------------------------------------------------------------------------
+class OrthoTexture:
+    """A real orthoimage as a texture, resampled bilinearly on request.
+
+    Parameters
+    ----------
+    path : str or path-like
+        PNG/JPEG (read with OpenCV; colour channels reordered to R, G, B[, A]) or
+        TIFF (read with tifffile, channels in file order). North-up: image row 0 is
+        the +y edge.
+    texel_m : float
+        Ground size of one image pixel (m, > 0).
+    bands : mapping of str to int
+        Band name → channel index, e.g. ``{"red": 0, "green": 1, "blue": 2, "nir": 3}``.
+        A requested ``pan`` not in the mapping is the ``PAN_WEIGHTS`` mean of the
+        available blue/green/red/nir (renormalised).
+    x0_m, y0_m : float, optional
+        Ground coordinates (m) of the image's lower-left corner (last row, first
+        column, outer edge); default: image centred on (0, 0).
+    scale : float, optional
+        Digital number → reflectance factor; default 1/255 for 8-bit, 1/65535
+        for 16-bit, 1 for floating-point images.
+    output_bands : sequence of str, optional
+        Bands returned by :meth:`grid`, in order; default: the mapping's names.
+
+    Outside the image, :meth:`grid` returns the nearest edge pixel.
+    """
+
+    def __init__(self, path, *, texel_m: float, bands: Mapping[str, int], x0_m: float | None = None,
+                 y0_m: float | None = None, scale: float | None = None,
+                 output_bands: Sequence[str] | None = None):
+        p = os.fspath(path)
+        if not os.path.isfile(p):
+            raise ValueError(f"path: file not found: {p}")
+        if not (isinstance(texel_m, (int, float)) and math.isfinite(texel_m) and texel_m > 0):
+            raise ValueError(f"texel_m: must be > 0, got {texel_m!r}")
+        img = self._read(p)
+        if img.ndim == 2:
+            img = img[:, :, None]
+        if img.ndim != 3 or img.shape[0] < 2 or img.shape[1] < 2:
+            raise ValueError(f"path: {p} is not a 2-D image (shape {img.shape})")
+        if not isinstance(bands, Mapping) or not bands:
+            raise ValueError("bands: must map band names to channel indices")
+        for name, ch in bands.items():
+            if name not in BAND_NAMES:
+                raise ValueError(f"bands: unknown band {name!r}; choose from {', '.join(BAND_NAMES)}")
+            if isinstance(ch, bool) or not isinstance(ch, (int, np.integer)) or not 0 <= ch < img.shape[2]:
+                raise ValueError(f"bands.{name}: must be a channel index in [0, {img.shape[2] - 1}], got {ch!r}")
+        if scale is None:
+            if img.dtype == np.uint8:
+                scale = 1 / 255
+            elif img.dtype == np.uint16:
+                scale = 1 / 65535
+            else:
+                scale = 1.0
+        if not (math.isfinite(scale) and scale > 0):
+            raise ValueError(f"scale: must be > 0, got {scale}")
+        self.path = p
+        self.texel_m = float(texel_m)
+        nrow, ncol = img.shape[:2]
+        self.x0_m = -0.5 * ncol * texel_m if x0_m is None else float(x0_m)
+        self.y0_m = -0.5 * nrow * texel_m if y0_m is None else float(y0_m)
+        # flip rows: internal row j is at y = y0 + (j + 1/2) texel
+        self._img = {name: np.ascontiguousarray(img[::-1, :, ch], dtype=_F32) * _F32(scale)
+                     for name, ch in bands.items()}
+        self.bands = _check_bands(tuple(bands) if output_bands is None else output_bands)
+        for b in self.bands:
+            if b not in self._img and not (b == "pan" and any(k in self._img for k in BAND_NAMES[:4])):
+                raise ValueError(f"output_bands: band {b!r} is not in the bands mapping")
+
+    @staticmethod
+    def _read(p):
+        ext = os.path.splitext(p)[1].lower()
+        try:
+            if ext in (".tif", ".tiff"):
+                import tifffile
+                img = np.asarray(tifffile.imread(p))
+                if img.ndim == 3 and img.shape[0] < min(img.shape[1:]) and img.shape[0] <= 8:
+                    img = np.moveaxis(img, 0, -1)  # planar → interleaved
+                return img
+            import cv2
+            img = cv2.imread(p, cv2.IMREAD_UNCHANGED)
+            if img is None:
+                raise ValueError("OpenCV could not decode it")
+            if img.ndim == 3 and img.shape[2] >= 3:
+                img = img[:, :, [2, 1, 0] + list(range(3, img.shape[2]))]
+            return img
+        except Exception as exc:
+            raise ValueError(f"path: cannot read image {p}: {exc}") from None
+
+    @property
+    def shape(self):
+        """(rows, columns) of the image."""
+        return next(iter(self._img.values())).shape
+
+    def _sample(self, arr, x, y):
+        nrow, ncol = arr.shape
+        fx = np.clip((x - self.x0_m) / self.texel_m - 0.5, 0, ncol - 1)
+        fy = np.clip((y - self.y0_m) / self.texel_m - 0.5, 0, nrow - 1)
+        i = np.minimum(np.floor(fx).astype(np.intp), ncol - 2)
+        j = np.minimum(np.floor(fy).astype(np.intp), nrow - 2)
+        tx = (fx - i).astype(_F32)
+        ty = (fy - j).astype(_F32)[:, None]
+        j0 = int(j.min())
+        rows = arr[j0:int(j.max()) + 2]
+        a = rows[:, i]
+        a = a + (rows[:, i + 1] - a) * tx
+        lj = j - j0
+        b = a[lj]
+        return b + (a[lj + 1] - b) * ty
+
+    def grid(self, x0_m: float, y0_m: float, texel_m: float, nx: int, ny: int) -> np.ndarray:
+        """Reflectance on a texel grid (same convention as :meth:`ProceduralTexture.grid`).
+
+        Returns
+        -------
+        ndarray (nbands, ny, nx) float32, clipped to [0, 1].
+        """
+        _check_grid_args(x0_m, y0_m, texel_m, nx, ny)
+        x = x0_m + (np.arange(int(nx)) + 0.5) * texel_m
+        y = y0_m + (np.arange(int(ny)) + 0.5) * texel_m
+        cache = {}
+
+        def band(name):
+            if name not in cache:
+                cache[name] = self._sample(self._img[name], x, y)
+            return cache[name]
+
+        out = np.empty((len(self.bands), int(ny), int(nx)), dtype=_F32)
+        for k, name in enumerate(self.bands):
+            if name in self._img:
+                out[k] = band(name)
+            else:  # pan from the available spectral bands
+                acc, wsum = None, 0.0
+                for b, wgt in zip(BAND_NAMES[:4], PAN_WEIGHTS):
+                    if b in self._img:
+                        term = band(b) * _F32(wgt)
+                        acc = term if acc is None else acc + term
+                        wsum += wgt
+                out[k] = acc / _F32(wsum)
+        return _clip01(out)
+
+    def land_cover(self, x, y) -> np.ndarray:
+        """Unknown for a real image: ``LandCover.UNKNOWN`` everywhere (uint8)."""
+        x, y = np.broadcast_arrays(np.asarray(x), np.asarray(y))
+        return np.full(x.shape, LandCover.UNKNOWN, dtype=_U8)
