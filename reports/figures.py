@@ -386,17 +386,25 @@ def measure_sinusoid_response(freqs_hz, taus_s: Sequence[float], *, method: str,
 
 
 def _gain_phase_stats(prefix: str, z: np.ndarray) -> dict[str, np.ndarray]:
-    n = z.shape[1]
-    g = np.abs(z)
-    mean_dir = np.nanmean(z / np.where(g > 0, g, 1.0), axis=1)
-    phase = np.angle(mean_dir)
-    dev = np.angle(z * np.exp(-1j * phase)[:, None])  # wrapped deviations, rad
-    sd = lambda a: np.nanstd(a, axis=1, ddof=1) / np.sqrt(n)  # noqa: E731
+    """Gain and phase of complex per-trial ratios ``z`` (frequency × trial).
+
+    The ratios are averaged coherently (complex mean; the noise term has random
+    phase from trial to trial, so the mean is unbiased, unlike the mean of |z|,
+    which is biased up where the true gain is 0).  Standard errors: the scatter
+    of the in-phase (gain) and quadrature (phase) components over trials / √n.
+    """
+    n = np.sum(np.isfinite(z), axis=1)
+    zm = np.nanmean(z, axis=1)
+    rot = z * np.exp(-1j * np.angle(zm))[:, None]
+    gain = np.abs(zm)
+    gain_se = np.nanstd(rot.real, axis=1, ddof=1) / np.sqrt(n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        phase_se = np.nanstd(rot.imag, axis=1, ddof=1) / np.sqrt(n) / gain
     return {
-        f"{prefix}_gain": np.nanmean(g, axis=1),
-        f"{prefix}_gain_se": sd(g),
-        f"{prefix}_phase_deg": np.degrees(phase),
-        f"{prefix}_phase_se_deg": np.degrees(sd(dev)),
+        f"{prefix}_gain": gain,
+        f"{prefix}_gain_se": gain_se,
+        f"{prefix}_phase_deg": np.degrees(np.angle(zm)),
+        f"{prefix}_phase_se_deg": np.degrees(phase_se),
     }
 
 
@@ -1023,7 +1031,7 @@ def method_unavailable(method: str, integrate: Callable | None = None, **options
     try:
         integrate([d], [tau], dt, method=method, **options)
     except (ImportError, NotImplementedError) as exc:
-        return f"integrate(method={method!r}): {type(exc).__name__}: {exc}"
+        return f"integrate(method={method!r}) unavailable: {exc}"
     except ValueError as exc:
         if "method" in str(exc).split(":")[0]:
             return f"integrate(method={method!r}): {exc}"

@@ -283,6 +283,19 @@ def test_mc_wiener_single_pair_on_curves(integrate):
     _assert_within_bars(r["value"], 0 * r["value"], r["stderr"], what="chain_phase_deg", floor=0.01)
 
 
+def test_noiseless_transfer_equals_formula(integrate):
+    """Without noise the measured transfer is the formula to numerical precision."""
+    fr = np.array([20.16, 126.34, 142.47, 260.75, 529.57])
+    r = F.measure_sinusoid_response(fr, [TAU], method=F.CONSTANT_K_METHOD, options={"k": K},
+                                    dt_s=F.WIENER_MC_DT_S, n_samples=F.WIENER_MC_N, n_trials=2,
+                                    noise_std=0.0, seed=0, integrate=integrate)
+    np.testing.assert_allclose(r["chain_gain"], ref_chain_gain(fr, TAU, K), atol=1e-6)
+    np.testing.assert_allclose(r["chain_phase_deg"], 0.0, atol=1e-3)
+    np.testing.assert_allclose(r["estimator_gain"], ref_estimator_gain(fr, TAU, K), rtol=1e-6)
+    np.testing.assert_allclose(np.exp(1j * np.radians(r["estimator_phase_deg"])),
+                               ref_estimator_phasor(fr, TAU), atol=1e-6)
+
+
 def test_mc_wiener_k_and_tau_families_on_curves(integrate):
     d = F.fig10_data(monte_carlo=True, n_trials=10, seed=5, integrate=integrate)
     r = _rows(d.table, "chain_gain", "monte_carlo")

@@ -91,7 +91,7 @@ _CROPS = [
     ("green_crop", "dark_soil", 0.55, 0.50, 0.00, LandCover.CROPLAND),  # young crop in rows
 ]
 _CROP_P = np.array([0.22, 0.15, 0.13, 0.10, 0.15, 0.10, 0.07, 0.08])
-_CROP_BY_BYTE = np.searchsorted(np.cumsum(_CROP_P) / _CROP_P.sum() * 256, np.arange(256) + 0.5).astype(np.uint8)
+_CROP_BY_BYTE = np.searchsorted(np.cumsum(_CROP_P) / _CROP_P.sum() * 256, np.arange(256) + 0.5).astype(np.intp)
 _CROP_M1 = np.array([_M[c[0]] for c in _CROPS], dtype=np.uint8)
 _CROP_M2 = np.array([_M[c[1]] for c in _CROPS], dtype=np.uint8)
 _CROP_A0 = np.array([c[2] for c in _CROPS], dtype=_F32)
@@ -103,7 +103,7 @@ _NSUB_BY_BYTE = np.array([1] * 180 + [2] * 30 + [3] * 24 + [4] * 14 + [6] * 8, d
 # Forest stands: (crown, gap, base cover, fine-crown weight)
 _STANDS = [("broadleaf_crown", "canopy_gap", 0.65, 0.45), ("conifer_crown", "canopy_gap", 0.55, 0.8),
            ("shrub", "light_soil", 0.45, 0.3)]
-_STAND_BY_BYTE = np.array([0] * 140 + [1] * 80 + [2] * 36, dtype=np.uint8)
+_STAND_BY_BYTE = np.array([0] * 140 + [1] * 80 + [2] * 36, dtype=np.intp)
 _STAND_M1 = np.array([_M[s[0]] for s in _STANDS], dtype=np.uint8)
 _STAND_M2 = np.array([_M[s[1]] for s in _STANDS], dtype=np.uint8)
 _STAND_A0 = np.array([s[2] for s in _STANDS], dtype=_F32)
@@ -123,14 +123,7 @@ _OCT_CLOUD = ((4096, 2048, 1024, 512, 256, 128), (1, .5, .25, .125, .0625, .03))
 _OCT_WROAD = ((1600, 800), (1, .4))
 
 _U8 = np.uint8
-import time as _time
-_TT = {}
-_last = [0.0, None]
-def _tick(name):
-    t = _time.perf_counter()
-    if _last[1] is not None:
-        _TT[_last[1]] = _TT.get(_last[1], 0) + t - _last[0]
-    _last[0] = t; _last[1] = name if name != 'end' else None
+_U32 = np.uint32
 
 
 def _check_fraction(name, v):
@@ -244,6 +237,7 @@ class ProceduralTexture:
         self.texel_m = float(texel_m)
         self.cloud_height_m = float(cloud_height_m)
         self.workers = int(workers)
+        self._tile = 256
         self._setup()
 
     def __repr__(self) -> str:
@@ -362,8 +356,8 @@ class ProceduralTexture:
         qy = quantise(y0_m + (np.arange(ny) + 0.5) * texel_m)[:, None]
         out = np.empty((len(self.bands), ny, nx), dtype=_F32)
         # square-ish tiles keep the per-tile lookup tables (rotated layouts) small
-        tw = min(nx, 512)
-        th = min(ny, max(16, 262144 // tw))
+        tw = min(nx, self._tile)
+        th = min(ny, max(16, self._tile * self._tile // tw))
         chunks = [(j, min(ny, j + th), i, min(nx, i + tw)) for j in range(0, ny, th) for i in range(0, nx, tw)]
 
         def work(c):
@@ -487,10 +481,20 @@ class ProceduralTexture:
         h = nz.unit(nz.hash2(m, k2, self._salt[15] + 3)).astype(np.float64)
         return (np.asarray(m, np.int64) * su + 0.8 * su * (h - 0.5)).astype(_F32)
 
-    def _parcel_hash(self, m, k2):
-        """64 random bits per parcel."""
+    def _parcel_attrs(self, m, k2):
+        """Attributes of parcel m of strip k2: (crop byte, sub-strips, 1/row period (1/m),
+        rows along u, brightness gain, margin width (m), hedge, forest stand type)."""
         h = nz.hash2(m, k2, self._salt[17])
-        return (h.astype(np.uint64) << np.uint64(32)) | nz.rehash(h, 5).astype(np.uint64)
+        g = nz.rehash(h, 5)
+        byte = lambda a, s: ((a >> _U32(s)) & _U32(0xFF)).astype(np.intp)  # noqa: E731
+        return (byte(h, 0),
+                _NSUB_BY_BYTE[byte(h, 8)],
+                _F32(1.0) / (_F32(3.0) + byte(h, 16).astype(_F32) * _F32(9.0 / 255)),
+                (h & _U32(0x01000000)) != 0,
+                _F32(0.9) + byte(g, 8).astype(_F32) * _F32(0.2 / 255),
+                _F32(0.6) + ((h >> _U32(26)) & _U32(3)).astype(_F32) * _F32(0.6),
+                (h & _U32(0x02000000)) != 0,
+                _STAND_BY_BYTE[byte(g, 0)])
 
     def _road_pos(self, k, d):
         h = nz.unit(nz.hash2(k, d, self._salt[18])).astype(np.float64)
@@ -508,7 +512,6 @@ class ProceduralTexture:
         x, y = c.x, c.y
         S = self._salt
         i32 = np.intp  # index arrays: intp gathers are several times faster than int32
-        _tick('noise')
         # ---- noise fields shared by the classes (values in ~[-1, 1]) -----------
         n2 = value_noise(c, 2.0, S[10])
         n5 = value_noise(c, 5.0, S[11])
@@ -517,7 +520,6 @@ class ProceduralTexture:
         nw = self._macro_field(c, "water")
         nf = self._macro_field(c, "forest")
         nd = self._macro_field(c, "domain")
-        _tick('frames')
         # ---- frames ----------------------------------------------------------
         u = self._cu * x + self._su * y
         v = self._cu * y - self._su * x
@@ -525,7 +527,6 @@ class ProceduralTexture:
         uf = np.where(domb, self._cb * x + self._sb * y, u)
         vf = np.where(domb, self._cb * y - self._sb * x, v)
 
-        _tick('agricultural')
         # ---- agricultural parcels (default land) ------------------------------
         # strips along the field frame's u axis, jittered boundaries b(k) in v
         kn = np.floor(vf * _F32(1.0 / self._Sv) + _F32(0.5)).astype(i32)
@@ -544,60 +545,48 @@ class ProceduralTexture:
         su = strips.take(2, ik)
         up = uf + strips.take(3, ik) * su
         # parcels along each strip, jittered boundaries c(m) in u
-        _tick('agri0')
         mn = np.floor(up / su + _F32(0.5)).astype(i32)
-        cols = Lookup.around([self._col_b, self._parcel_hash], mn, ks, n, margin_i=2)
+        cols = Lookup.around([self._col_b, self._parcel_attrs], mn, ks, n, margin_i=2)
         ic = cols.index(mn, ks)
         left = up < cols.take(0, ic)
         ic = cols.shift_i(ic, -left.astype(i32))
         ulo = cols.take(0, ic)
         uhi = cols.take(0, cols.shift_i(ic, 1))
-        hp = cols.take(1, ic)
-        _tick('agri1')
+        # per-parcel attributes (outputs 1.. of the table)
+        p_byte, p_nsub, p_iper, p_along_u, p_gain, p_wmarg, p_hedge, p_stand = (cols.take(k, ic) for k in range(1, 9))
         du = np.minimum(up - ulo, uhi - up)
         dv = np.minimum(vf - lo, hi - vf)
-        nsub = _NSUB_BY_BYTE[((hp >> 8) & 0xFF).astype(np.intp)]
-        sub = np.minimum(np.floor((up - ulo) / (uhi - ulo) * nsub), nsub - _F32(1.0)).astype(np.intp)
+        sub = np.minimum(np.floor((up - ulo) / (uhi - ulo) * p_nsub), p_nsub - _F32(1.0)).astype(np.intp)
         sub *= 97
-        sub += (hp & 0xFF).astype(np.intp)
+        sub += p_byte
         sub &= 0xFF
-        ctype = _CROP_BY_BYTE[sub]
-        _tick('agri2')
-        period = _F32(3.0) + ((hp >> 16) & 0xFF).astype(_F32) * _F32(9.0 / 255)
-        along_u = (hp & 0x01000000) != 0
-        w = np.where(along_u, up, vf)
-        w /= period
+        ctype = _CROP_BY_BYTE[sub]                  # crop of the parcel's sub-strip
+        w = np.where(p_along_u, up, vf)
+        w *= p_iper
         tri = w - np.floor(w)
         tri -= _F32(0.5)
         np.abs(tri, out=tri)
         tri *= _F32(4.0)
-        tri -= _F32(1.0)                             # triangle wave in [-1, 1]
-        _tick('agri3')
+        tri -= _F32(1.0)                             # row pattern: triangle wave in [-1, 1]
         alpha = _CROP_A0[ctype] + _CROP_AMP[ctype] * tri + _F32(0.15) * n40 + _F32(0.08) * n5
         _clip01(alpha)
         gain = _CROP_FAMP[ctype] * tri
         gain += _F32(1.0)
         gain += _F32(0.03) * n2 + _F32(0.04) * n12
-        gain *= _F32(0.9) + ((hp >> 40) & 0xFF).astype(_F32) * _F32(0.2 / 255)
-        _tick('agri4')
+        gain *= p_gain
         m1 = _CROP_M1[ctype]
         m2 = _CROP_M2[ctype]
         cls = _CROP_CLS[ctype]
         # margins (hedges / grass strips) and gravel tracks on some strip boundaries
-        _tick('agri5')
-        wmarg = _F32(0.6) + ((hp >> 26) & 0x3).astype(_F32) * _F32(0.6)
-        margin = np.minimum(du, dv) < wmarg
+        margin = np.minimum(du, dv) < p_wmarg
         if np.any(margin):
-            hedge = margin & ((hp & 0x02000000) != 0)
             m1[margin] = _M["dry_grass"]
             m2[margin] = _M["pasture"]
-            m1[hedge] = _M["hedge"]
+            m1[margin & p_hedge] = _M["hedge"]
             alpha[margin] = _F32(0.5)
-        _tick('agri6')
         track = ((strips.take(1, ik) != 0) & (vf - lo < _F32(1.7))) | \
                 ((strips.take(1, ik_hi) != 0) & (hi - vf < _F32(1.7)))
 
-        _tick('water')
         # ---- water, shores, built-up blocks, forest --------------------------------
         water = nw + _F32(0.012) * n12 < self._t_water
         shore = ~water & (nw < self._t_shore)
@@ -611,7 +600,7 @@ class ProceduralTexture:
         forest &= ~water & ~urban & ~shore
         if np.any(forest):
             fidx = np.nonzero(forest)
-            stand = _STAND_BY_BYTE[((hp[fidx] >> 32) & 0xFF).astype(np.intp)]
+            stand = p_stand[fidx]
             dx, dy = 1.5 * self._sun_xy[0], 1.5 * self._sun_xy[1]
             n5f, n2f, n12f = n5[fidx], n2[fidx], n12[fidx]
             n5s = value_noise(c.shifted(dx, dy), 5.0, S[11])[fidx]
@@ -627,7 +616,6 @@ class ProceduralTexture:
             alpha[shore] = np.clip(_F32(0.5) + _F32(0.8) * n5[shore] + _F32(0.3) * n12[shore], _F32(0), _F32(1))
             cls[shore] = LandCover.GRASSLAND
 
-        _tick('roads')
         # ---- roads -------------------------------------------------------------
         road = track.copy()
         bright = track.copy()
@@ -659,11 +647,9 @@ class ProceduralTexture:
         shadow = None
         if np.any(urban):
             shadow = np.zeros(shape, dtype=_F32)
-            _tick('urban')
             self._urban(urban, u, v, bu, bv, bcode, blocks, n2, n5, n12, m1, m2, alpha, gain, shadow, cls,
                         want_shadows=want_bands)
 
-        _tick('water')
         # ---- water (dark, nearly uniform; a little brighter near the shore) -------
         if np.any(water):
             widx = np.nonzero(water)
@@ -673,7 +659,6 @@ class ProceduralTexture:
             gain[widx] = _F32(1.0) + _F32(0.01) * n40[widx]
             cls[widx] = LandCover.WATER
 
-        _tick('clouds')
         # ---- clouds (smooth, bright) and their shadows ---------------------------
         cloud = cshadow = cloud_bright = None
         if self.cloud_fraction > 0:
@@ -685,11 +670,9 @@ class ProceduralTexture:
             cls[cloud >= _F32(0.5)] = LandCover.CLOUD
             cloud_bright = _F32(0.88) + _F32(0.12) * np.clip((nc - self._t_cloud) * _F32(2.0), _F32(0), _F32(1))
 
-        _tick('end')
         if not want_bands:
             return cls, None
 
-        _tick('reflectance')
         # ---- reflectance per band ----------------------------------------------
         i1 = m1.astype(np.intp)
         i2 = m2.astype(np.intp)
@@ -717,7 +700,6 @@ class ProceduralTexture:
                     p += vis_nir[b] * _F32(PAN_WEIGHTS[b])
             else:
                 out[o] = vis_nir[BAND_NAMES.index(name)]
-        _tick('end')
         return cls, out
 
     def _urban(self, urban, u, v, bu, bv, bcode, blocks, n2, n5, n12, m1, m2, alpha, gain, shadow, cls, *,
@@ -759,7 +741,7 @@ class ProceduralTexture:
         A[tree] = np.clip(_F32(0.4) + _F32(1.5) * (n5u[tree] - _F32(0.5)) + _F32(0.5) * n2u[tree], _F32(0), _F32(1))
         # the lot's own building: ridged roofs for houses, flat roofs for large buildings
         na, nb = self._na, self._nb
-        lots = Lookup.around([lambda i, j: self._building(i, j, blocks)], gu, gv, n, margin_i=na, margin_j=nb)
+        lots = Lookup.around([lambda i, j: self._building(i, j, blocks)], gu, gv, n)
         il = lots.index(gu, gv)
         u0, u1, v0, v1 = (lots.take(k, il) for k in range(4))
         roof, present = lots.take(5, il), lots.take(6, il)
@@ -773,27 +755,43 @@ class ProceduralTexture:
         ridge_g = np.where(facing, _F32(1.12), _F32(0.82))
         G = np.where(onroof, np.where(code == 2, _F32(1.0) + _F32(0.03) * n2u, ridge_g), G)
         C[onroof] = LandCover.BUILDING
-        # shadows cast on the ground by this and neighbouring buildings (anti-sun side)
+        # shadows cast on the ground by this and neighbouring buildings (anti-sun side):
+        # texel p is shaded by a building B of height h if p + t s (s: horizontal unit
+        # vector toward the sun) enters B for some 0 < t <= h / tan(e). Per building
+        # the lot table holds B's bounds already divided by s's components.
         if not want_shadows:
             na = nb = -1
         sgu = 1 if self._sun_uv[0] >= 0 else -1
         sgv = 1 if self._sun_uv[1] >= 0 else -1
-        isu = _F32(1.0 / (su if abs(su) > 1e-6 else 1e-6))
-        isv = _F32(1.0 / (sv if abs(sv) > 1e-6 else 1e-6))
         ground = ~onroof
         sh = np.zeros(n, dtype=bool)
-        inv_tan = _F32(1.0 / self._tan_e)
-        for a in range(na + 1):
-            for b in range(nb + 1):
-                ic = lots.index(gu + a * sgu, gv + b * sgv)
-                cu0, cu1, cv0, cv1, ch, cp = (lots.take(k, ic) for k in (0, 1, 2, 3, 4, 6))
-                ta = (cu0 - pu) * isu
-                tb = (cu1 - pu) * isu
-                tc = (cv0 - pv) * isv
-                td = (cv1 - pv) * isv
-                t_lo = np.maximum(np.maximum(np.minimum(ta, tb), np.minimum(tc, td)), _F32(0.0))
-                t_hi = np.minimum(np.minimum(np.maximum(ta, tb), np.maximum(tc, td)), ch * inv_tan)
-                sh |= cp & (t_lo <= t_hi)
+        if na >= 0:
+            isu = _F32(1.0 / (su if abs(su) > 1e-6 else 1e-6))
+            isv = _F32(1.0 / (sv if abs(sv) > 1e-6 else 1e-6))
+            inv_tan = _F32(1.0 / self._tan_e)
+
+            def shadow_params(i, j):
+                bu0, bu1, bv0, bv1, hgt, _, pres = self._building(i, j, blocks)
+                if isu < 0:
+                    bu0, bu1 = bu1, bu0
+                if isv < 0:
+                    bv0, bv1 = bv1, bv0
+                reach = np.where(pres, hgt * inv_tan, _F32(-1.0))
+                return bu0 * isu, bu1 * isu, bv0 * isv, bv1 * isv, reach
+
+            slots = Lookup.around([shadow_params], gu, gv, n, margin_i=na, margin_j=nb)
+            P = pu * isu
+            Q = pv * isv
+            for a in range(na + 1):
+                for b in range(nb + 1):
+                    ic = slots.index(gu + a * sgu, gv + b * sgv)
+                    t_lo = slots.take(0, ic) - P
+                    np.maximum(t_lo, slots.take(2, ic) - Q, out=t_lo)
+                    np.maximum(t_lo, _F32(0.0), out=t_lo)
+                    t_hi = slots.take(1, ic) - P
+                    np.minimum(t_hi, slots.take(3, ic) - Q, out=t_hi)
+                    np.minimum(t_hi, slots.take(4, ic), out=t_hi)
+                    sh |= t_lo <= t_hi
         sh &= ground
         m1[idx] = M1
         m2[idx] = M2
