@@ -423,13 +423,16 @@ def measure_polynomial_gain(taus_s, *, degree: int = FIG14_DEGREE,
     ``n_lines`` samples.  Error e(t) = (θ̂(t) − θ̂(0)) − (θ(t) − θ(0)) (the
     patent's origin convention, θ0 unobservable).  σ(t) = RMS of e(t) over
     trials; reported: mean_t σ(t) and max_t σ(t), with standard errors from a
-    bootstrap over trials.
+    bootstrap over trials.  The statistics run over the lines where
+    ``integrate`` returns an estimate (it declines to extrapolate past the last
+    observed line, e.g. the last 9 lines when one line in 10 is measured);
+    ``coverage`` gives that fraction.  θ̂(0) must exist (line 0 is measured).
 
     Returns
     -------
     dict
-        ``tau_s``, ``mean``, ``mean_se``, ``max``, ``max_se``, ``n_trials``,
-        ``seconds``.
+        ``tau_s``, ``mean``, ``mean_se``, ``max``, ``max_se``, ``coverage``,
+        ``n_trials``, ``seconds``.
     """
     integrate = integrate or _get_integrate()
     opts = {"degree": degree}
@@ -440,7 +443,7 @@ def measure_polynomial_gain(taus_s, *, degree: int = FIG14_DEGREE,
     t_acq = n_lines * line_period_s
     meas = np.zeros(n_lines, dtype=bool)
     meas[::lines_per_measurement] = True
-    out = {k: np.empty(taus.size) for k in ("mean", "mean_se", "max", "max_se")}
+    out = {k: np.empty(taus.size) for k in ("mean", "mean_se", "max", "max_se", "coverage")}
     t0 = time.perf_counter()
     for i, tau in enumerate(taus):
         err = np.empty((n_trials, n_lines))
@@ -451,8 +454,14 @@ def measure_polynomial_gain(taus_s, *, degree: int = FIG14_DEGREE,
             d = np.where(meas, d + rng.standard_normal(n_lines), np.nan)
             est = np.asarray(integrate([d], [float(tau)], line_period_s, method="polynomial",
                                        **opts), dtype=float)
+            if est.shape != (n_lines,) or not np.isfinite(est[0]):
+                raise RuntimeError("integrate(method='polynomial') gave no estimate at line 0 "
+                                   f"(tau = {tau} s)")
             th = theta(t)
             err[r] = (est - est[0]) - (th - th[0])
+        covered = np.all(np.isfinite(err), axis=0)
+        out["coverage"][i] = covered.mean()
+        err = err[:, covered]
         sig = np.sqrt(np.mean(err ** 2, axis=0))
         out["mean"][i], out["max"][i] = sig.mean(), sig.max()
         boot = rng.integers(0, n_trials, size=(n_boot, n_trials))
@@ -753,7 +762,7 @@ def fig14_data(*, taus_s=FIG14_TAUS_S, degree: int = FIG14_DEGREE,
         for s in ("mean", "max"):
             blocks.append(_block("monte_carlo", f"sigma_ratio_{s}", s, "1", tau_s=mc["tau_s"],
                                  value=mc[s], stderr=mc[f"{s}_se"], n_trials=mc["n_trials"],
-                                 **common))
+                                 coverage=mc["coverage"], **common))
         meta["monte_carlo"] = True
         meta["mc"] = {"n_trials": n_trials, "seconds": mc["seconds"]}
     return FigureData(14, FIGURE_NAMES[14], _concat(blocks), meta)

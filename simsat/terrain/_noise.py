@@ -275,9 +275,8 @@ def value_noise(c: Coords, cell_m: float, salt: int) -> np.ndarray:
     return lattice_interp(c, cell_m, signed_lattice(salt))
 
 
-def fbm_points(qx: np.ndarray, qy: np.ndarray, cells_m, gains, salt: int) -> np.ndarray:
-    """Fractal sum of value-noise octaves at scattered quantised points (float32)."""
-    c = Coords(np.asarray(qx, dtype=np.int64), np.asarray(qy, dtype=np.int64), False)
+def fbm(c: Coords, cells_m, gains, salt: int) -> np.ndarray:
+    """Fractal sum of value-noise octaves (float32) at ``c``."""
     out = None
     for k, (cell, gain) in enumerate(zip(cells_m, gains)):
         term = value_noise(c, cell, salt + 7919 * k) * _F32(gain)
@@ -285,11 +284,84 @@ def fbm_points(qx: np.ndarray, qy: np.ndarray, cells_m, gains, salt: int) -> np.
     return out
 
 
+def fbm_points(qx: np.ndarray, qy: np.ndarray, cells_m, gains, salt: int) -> np.ndarray:
+    """:func:`fbm` at scattered quantised points."""
+    return fbm(Coords(np.asarray(qx, dtype=np.int64), np.asarray(qy, dtype=np.int64), False), cells_m, gains, salt)
+
+
+def _is_grid(ix, iy) -> bool:
+    return ix.ndim == 2 and iy.ndim == 2 and ix.shape[0] == 1 and iy.shape[1] == 1
+
+
 def fbm_lattice(node_m: float, cells_m, gains, salt: int) -> Callable:
-    """Lattice function whose node values are an fBm evaluated at the node positions."""
+    """Lattice function whose node values are an fBm evaluated at the node positions.
+
+    Called with a row of x indices and a column of y indices (as the grid path of
+    :func:`lattice_interp` does), it evaluates the fBm on that grid of nodes with
+    the fast separable path; the values equal the point-wise ones bit for bit.
+    """
     node_q = int(round(node_m * QUANTA_PER_M))
 
     def fn(ix, iy):
-        ix, iy = np.broadcast_arrays(np.asarray(ix, dtype=np.int64), np.asarray(iy, dtype=np.int64))
+        ix = np.asarray(ix, dtype=np.int64)
+        iy = np.asarray(iy, dtype=np.int64)
+        if _is_grid(ix, iy):
+            return fbm(Coords(ix * node_q, iy * node_q, True), cells_m, gains, salt)
+        ix, iy = np.broadcast_arrays(ix, iy)
         return fbm_points(ix * node_q, iy * node_q, cells_m, gains, salt)
     return fn
+
+
+class CachedLattice:
+    """Memoise an elementwise lattice function ``fn(ix, iy)`` by square blocks of nodes.
+
+    Neighbouring texture tiles need the same coarse nodes (macro land-use fields,
+    urban block codes); evaluating them once per block of ``block × block`` nodes
+    saves the per-tile overhead. Values are those of ``fn`` itself (it is
+    elementwise), so caching cannot change any result. Thread-safe; keeps at most
+    ``max_blocks`` blocks (least recently used are dropped).
+    """
+
+    def __init__(self, fn: Callable, *, block: int = 64, max_blocks: int = 256):
+        import threading
+        from collections import OrderedDict
+        self.fn = fn
+        self.block = int(block)
+        self.max_blocks = int(max_blocks)
+        self._cache: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
+        self._lock = threading.Lock()
+
+    def _get(self, bx: int, by: int) -> np.ndarray:
+        key = (bx, by)
+        with self._lock:
+            arr = self._cache.get(key)
+            if arr is not None:
+                self._cache.move_to_end(key)
+                return arr
+        b = self.block
+        arr = self.fn(np.arange(bx * b, bx * b + b, dtype=np.int64)[None, :],
+                      np.arange(by * b, by * b + b, dtype=np.int64)[:, None])
+        arr = np.ascontiguousarray(np.broadcast_to(arr, (b, b)))
+        arr.setflags(write=False)
+        with self._lock:
+            self._cache[key] = arr
+            while len(self._cache) > self.max_blocks:
+                self._cache.popitem(last=False)
+        return arr
+
+    def __call__(self, ix, iy):
+        ix = np.asarray(ix, dtype=np.int64)
+        iy = np.asarray(iy, dtype=np.int64)
+        if ix.size == 0 or iy.size == 0:
+            return self.fn(ix, iy)
+        b = self.block
+        bx0, bx1 = int(ix.min()) // b, int(ix.max()) // b
+        by0, by1 = int(iy.min()) // b, int(iy.max()) // b
+        nbx, nby = bx1 - bx0 + 1, by1 - by0 + 1
+        if nbx * nby > max(4, self.max_blocks // 4):
+            return self.fn(*np.broadcast_arrays(ix, iy))
+        region = np.empty((nby * b, nbx * b), dtype=self._get(bx0, by0).dtype)
+        for j in range(nby):
+            for i in range(nbx):
+                region[j * b:(j + 1) * b, i * b:(i + 1) * b] = self._get(bx0 + i, by0 + j)
+        return region[iy - by0 * b, ix - bx0 * b]

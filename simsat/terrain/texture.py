@@ -157,6 +157,11 @@ def _check_grid_args(x0_m, y0_m, texel_m, nx, ny):
             raise ValueError(f"{name}: must be a positive integer, got {v}")
 
 
+def _put(dst, mask, value):
+    """``dst[mask] = value`` (value: scalar or array of dst's shape)."""
+    np.copyto(dst, value, where=mask, casting="unsafe")
+
+
 def _smooth(t):
     return t * t * (_F32(3.0) - _F32(2.0) * t)
 
@@ -272,13 +277,15 @@ class ProceduralTexture:
         lmax = self._hmax / self._tan_e
         self._na = int(math.ceil(lmax * abs(self._sun_uv[0]) / self._Lu)) + 1
         self._nb = int(math.ceil(lmax * abs(self._sun_uv[1]) / self._Lv)) + 1
+        cached = nz.CachedLattice
         self._macro = {
-            "water": fbm_lattice(_NODE_M, *_OCT_WATER, self._salt[0]),
-            "forest": fbm_lattice(_NODE_M, *_OCT_FOREST, self._salt[1]),
-            "domain": fbm_lattice(_NODE_M, *_OCT_DOMAIN, self._salt[2]),
-            "cloud": fbm_lattice(_NODE_M, *_OCT_CLOUD, self._salt[3]),
-            "wroad": self._wroad_lattice(),
+            "water": cached(fbm_lattice(_NODE_M, *_OCT_WATER, self._salt[0])),
+            "forest": cached(fbm_lattice(_NODE_M, *_OCT_FOREST, self._salt[1])),
+            "domain": cached(fbm_lattice(_NODE_M, *_OCT_DOMAIN, self._salt[2])),
+            "cloud": cached(fbm_lattice(_NODE_M, *_OCT_CLOUD, self._salt[3])),
+            "wroad": cached(self._wroad_lattice()),
         }
+        self._block_code_cached = cached(self._block_code, block=32)
         self._calibrate()
 
     def _wroad_lattice(self):
@@ -288,11 +295,18 @@ class ProceduralTexture:
         salt = self._salt[4]
 
         def fn(ix, iy):
-            ix, iy = np.broadcast_arrays(np.asarray(ix, np.int64), np.asarray(iy, np.int64))
+            ix = np.asarray(ix, np.int64)
+            iy = np.asarray(iy, np.int64)
+            grid = nz._is_grid(ix, iy)
+            if not grid:
+                ix, iy = np.broadcast_arrays(ix, iy)
             qx, qy = ix * node_q, iy * node_q
-            n0 = fbm_points(qx, qy, *_OCT_WROAD, salt)
-            gx = (fbm_points(qx + h_q, qy, *_OCT_WROAD, salt) - fbm_points(qx - h_q, qy, *_OCT_WROAD, salt)) / _F32(4.0)
-            gy = (fbm_points(qx, qy + h_q, *_OCT_WROAD, salt) - fbm_points(qx, qy - h_q, *_OCT_WROAD, salt)) / _F32(4.0)
+
+            def f(dx, dy):
+                return nz.fbm(Coords(qx + dx, qy + dy, grid), *_OCT_WROAD, salt)
+            n0 = f(0, 0)
+            gx = (f(h_q, 0) - f(-h_q, 0)) / _F32(4.0)
+            gy = (f(0, h_q) - f(0, -h_q)) / _F32(4.0)
             g = np.sqrt(gx * gx + gy * gy) + _F32(1e-9)
             return np.clip(n0 / g, _F32(-1e4), _F32(1e4))
         return fn
@@ -579,11 +593,11 @@ class ProceduralTexture:
         cls = _CROP_CLS[ctype]
         # margins (hedges / grass strips) and gravel tracks on some strip boundaries
         margin = np.minimum(du, dv) < p_wmarg
-        if np.any(margin):
-            m1[margin] = _M["dry_grass"]
-            m2[margin] = _M["pasture"]
-            m1[margin & p_hedge] = _M["hedge"]
-            alpha[margin] = _F32(0.5)
+        if margin.any():
+            _put(m1, margin, _M["dry_grass"])
+            _put(m2, margin, _M["pasture"])
+            _put(m1, margin & p_hedge, _M["hedge"])
+            _put(alpha, margin, 0.5)
         track = ((strips.take(1, ik) != 0) & (vf - lo < _F32(1.7))) | \
                 ((strips.take(1, ik_hi) != 0) & (hi - vf < _F32(1.7)))
 
@@ -592,29 +606,37 @@ class ProceduralTexture:
         shore = ~water & (nw < self._t_shore)
         bu = np.floor(u * _F32(1.0 / self._Bu)).astype(i32)
         bv = np.floor(v * _F32(1.0 / self._Bv)).astype(i32)
-        blocks = Lookup.around([self._block_code], bu, bv, n, margin_i=self._na // self._nlu + 2,
+        blocks = Lookup.around([self._block_code_cached], bu, bv, n, margin_i=self._na // self._nlu + 2,
                                margin_j=self._nb // self._nlv + 2)
         bcode = blocks.take(0, blocks.index(bu, bv))
         urban = (bcode > 0) & ~water
         forest = nf + _F32(0.04) * n12 > self._t_forest
         forest &= ~water & ~urban & ~shore
-        if np.any(forest):
-            fidx = np.nonzero(forest)
-            stand = p_stand[fidx]
+        if forest.any():
             dx, dy = 1.5 * self._sun_xy[0], 1.5 * self._sun_xy[1]
-            n5f, n2f, n12f = n5[fidx], n2[fidx], n12[fidx]
-            n5s = value_noise(c.shifted(dx, dy), 5.0, S[11])[fidx]
-            crown = n5f + _STAND_W2[stand] * n2f
-            alpha[fidx] = np.clip(_STAND_A0[stand] + _F32(1.1) * crown + _F32(0.2) * n12f, _F32(0), _F32(1))
-            gain[fidx] = (_F32(1.0) + _F32(1.2) * (n5f - n5s)) * (_F32(1.0) + _F32(0.06) * n40[fidx])
-            m1[fidx] = _STAND_M1[stand]
-            m2[fidx] = _STAND_M2[stand]
-            cls[fidx] = LandCover.FOREST
-        if np.any(shore):                            # natural banks around water
-            m1[shore] = _M["pasture"]
-            m2[shore] = _M["shrub"]
-            alpha[shore] = np.clip(_F32(0.5) + _F32(0.8) * n5[shore] + _F32(0.3) * n12[shore], _F32(0), _F32(1))
-            cls[shore] = LandCover.GRASSLAND
+            n5s = value_noise(c.shifted(dx, dy), 5.0, S[11])
+            n37 = value_noise(c, 3.7, S[19])         # a second, incommensurate lattice: rounder crowns
+            crown = _STAND_W2[p_stand] * n2
+            crown += n5
+            crown += n37
+            crown *= _F32(0.8)
+            crown += _STAND_A0[p_stand] + _F32(0.2) * n12
+            _put(alpha, forest, _clip01(crown))
+            n5s -= n5
+            n5s += value_noise(c.shifted(dx, dy), 3.7, S[19])
+            n5s -= n37
+            n5s *= _F32(-0.9)
+            n5s += _F32(1.0)                         # crowns brighter on their sunny side
+            n5s *= _F32(1.0) + _F32(0.06) * n40
+            _put(gain, forest, n5s)
+            _put(m1, forest, _STAND_M1[p_stand])
+            _put(m2, forest, _STAND_M2[p_stand])
+            _put(cls, forest, LandCover.FOREST)
+        if shore.any():                              # natural banks around water
+            _put(m1, shore, _M["pasture"])
+            _put(m2, shore, _M["shrub"])
+            _put(alpha, shore, _clip01(_F32(0.5) + _F32(0.8) * n5 + _F32(0.3) * n12))
+            _put(cls, shore, LandCover.GRASSLAND)
 
         # ---- roads -------------------------------------------------------------
         road = track.copy()
@@ -636,28 +658,26 @@ class ProceduralTexture:
         bright |= winding
         road &= ~water
         road &= ~urban
-        if np.any(road):
-            ridx = np.nonzero(road)
-            m1[ridx] = np.where(bright[ridx], np.where(track[ridx], _U8(_M["gravel"]), _U8(_M["concrete"])),
-                                _U8(_M["asphalt"]))
-            alpha[ridx] = _F32(1.0)
-            gain[ridx] = _F32(1.0) + _F32(0.04) * n2[ridx]
-            cls[ridx] = LandCover.ROAD
+        if road.any():
+            mat = np.where(bright, np.where(track, _U8(_M["gravel"]), _U8(_M["concrete"])), _U8(_M["asphalt"]))
+            _put(m1, road, mat)
+            _put(alpha, road, 1.0)
+            _put(gain, road, _F32(1.0) + _F32(0.04) * n2)
+            _put(cls, road, LandCover.ROAD)
 
         shadow = None
-        if np.any(urban):
+        if urban.any():
             shadow = np.zeros(shape, dtype=_F32)
             self._urban(urban, u, v, bu, bv, bcode, blocks, n2, n5, n12, m1, m2, alpha, gain, shadow, cls,
                         want_shadows=want_bands)
 
         # ---- water (dark, nearly uniform; a little brighter near the shore) -------
-        if np.any(water):
-            widx = np.nonzero(water)
-            m1[widx] = _M["shallow_water"]
-            m2[widx] = _M["deep_water"]
-            alpha[widx] = np.clip((nw[widx] - self._t_water) * _F32(12.0) + _F32(0.6), _F32(0), _F32(0.6))
-            gain[widx] = _F32(1.0) + _F32(0.01) * n40[widx]
-            cls[widx] = LandCover.WATER
+        if water.any():
+            _put(m1, water, _M["shallow_water"])
+            _put(m2, water, _M["deep_water"])
+            _put(alpha, water, np.clip((nw - self._t_water) * _F32(12.0) + _F32(0.6), _F32(0), _F32(0.6)))
+            _put(gain, water, _F32(1.0) + _F32(0.01) * n40)
+            _put(cls, water, LandCover.WATER)
 
         # ---- clouds (smooth, bright) and their shadows ---------------------------
         cloud = cshadow = cloud_bright = None
@@ -667,7 +687,7 @@ class ProceduralTexture:
             L = self.cloud_height_m / self._tan_e
             ncs = self._macro_field(c.shifted(L * self._sun_xy[0], L * self._sun_xy[1]), "cloud")
             cshadow = _smooth(np.clip((ncs - self._t_cloud) * _F32(5.0) + _F32(0.5), _F32(0), _F32(1)))
-            cls[cloud >= _F32(0.5)] = LandCover.CLOUD
+            _put(cls, cloud >= _F32(0.5), LandCover.CLOUD)
             cloud_bright = _F32(0.88) + _F32(0.12) * np.clip((nc - self._t_cloud) * _F32(2.0), _F32(0), _F32(1))
 
         if not want_bands:
@@ -705,10 +725,8 @@ class ProceduralTexture:
     def _urban(self, urban, u, v, bu, bv, bcode, blocks, n2, n5, n12, m1, m2, alpha, gain, shadow, cls, *,
                want_shadows=True):
         """Streets, lots, buildings, gardens, parks and building shadows (in place, on the urban texels)."""
-        idx = np.nonzero(urban)
-        pu, pv = u[idx], v[idx]
-        gbu, gbv, code = bu[idx], bv[idx], bcode[idx]
-        n2u, n5u, n12u = n2[idx], n5[idx], n12[idx]
+        idx = np.flatnonzero(urban)
+        pu, pv, gbu, gbv, code, n2u, n5u, n12u = (np.take(a, idx) for a in (u, v, bu, bv, bcode, n2, n5, n12))
         Wst, Lu, Lv = _F32(self._Wst), _F32(self._Lu), _F32(self._Lv)
         ru = pu - (gbu * self._Bu).astype(_F32)
         rv = pv - (gbv * self._Bv).astype(_F32)
@@ -793,12 +811,8 @@ class ProceduralTexture:
                     np.minimum(t_hi, slots.take(4, ic), out=t_hi)
                     sh |= t_lo <= t_hi
         sh &= ground
-        m1[idx] = M1
-        m2[idx] = M2
-        alpha[idx] = A
-        gain[idx] = G
-        shadow[idx] = sh.astype(_F32)
-        cls[idx] = C
+        for dst, val in ((m1, M1), (m2, M2), (alpha, A), (gain, G), (shadow, sh), (cls, C)):
+            np.put(dst, idx, val)
 
 # -----------------------------------------------------------------------------
 # Orthoimage

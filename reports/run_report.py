@@ -1,0 +1,623 @@
+"""The run report: ``simsat report RUN_DIR`` → ``RUN_DIR/report/index.html``.
+
+One self-contained HTML page (PNG figures embedded as base64, no external
+JS/CSS) with the CSVs of the plotted data and the PNGs beside it. It reads the
+product, the restoration and the truth of a run — it never re-runs the
+simulation; it may re-run the *integration* (``restore.integration.integrate``)
+on differentials to measure its transfer function and to split the error
+budget. A run without ``truth.nc`` (a real product) or without
+``restoration.nc`` gets the sections that do not need them, and the page says
+what was left out.
+
+Data preparation lives in :mod:`reports.report_data`, drawing in
+:mod:`reports.report_plots`; this module lays the page out and writes the
+files, each atomically (temporary file + ``os.replace``), ``index.html`` last.
+"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time as _time
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from reports import plotting as P
+from reports import report_data as D
+from reports import report_plots as RP
+
+__all__ = ["make_run_report"]
+
+DPI = 100
+URAD = 1e6
+
+
+# ----------------------------------------------------------------------------- small helpers
+def _fmt(v, digits: int = 4) -> str:
+    if v is None:
+        return "—"
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (int, np.integer)):
+        return f"{int(v):,}"
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return html.escape(str(v))
+    if not np.isfinite(x):
+        return "∞" if x == np.inf else "—"
+    if x == 0:
+        return "0"
+    if abs(x) >= 1000 or abs(x) < 10 ** (-digits + 1):
+        return f"{x:.{max(digits - 1, 1)}g}" if abs(x) < 1e5 else f"{x:.3g}"
+    return f"{x:.{digits}g}"
+
+
+def _e(s) -> str:
+    return html.escape(str(s))
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    if isinstance(o, (np.bool_,)):
+        return bool(o)
+    return str(o)
+
+
+class _Page:
+    """Accumulates sections, figures (written as PNG + embedded) and CSVs."""
+
+    def __init__(self, out_dir: Path):
+        self.out_dir = out_dir
+        self.parts: list[str] = []
+        self.files: list[str] = []
+        self.toc: list[tuple[str, str]] = []
+
+    def section(self, anchor: str, title: str):
+        self.toc.append((anchor, title))
+        self.parts.append(f'<h2 id="{anchor}">{_e(title)}</h2>')
+
+    def html(self, s: str):
+        self.parts.append(s)
+
+    def para(self, text: str, cls: str = ""):
+        self.parts.append(f'<p class="{cls}">{text}</p>' if cls else f"<p>{text}</p>")
+
+    def note(self, text: str):
+        self.parts.append(f'<p class="note">{text}</p>')
+
+    def figure(self, fig, name: str, caption: str, *, width: int | None = None):
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=DPI)
+        data = buf.getvalue()
+        P.atomic_write_bytes(self.out_dir / name, data)
+        self.files.append(name)
+        b64 = base64.b64encode(data).decode("ascii")
+        style = f' style="max-width:{width}px"' if width else ""
+        self.parts.append(f'<figure><a href="{_e(name)}"><img alt="{_e(name)}" src="data:image/png;base64,{b64}"{style}>'
+                          f'</a><figcaption>{caption}</figcaption></figure>')
+
+    def png_file(self, path: Path, caption: str):
+        data = path.read_bytes()
+        self.files.append(path.name)
+        b64 = base64.b64encode(data).decode("ascii")
+        self.parts.append(f'<figure><a href="{_e(path.name)}"><img alt="{_e(path.name)}" '
+                          f'src="data:image/png;base64,{b64}"></a><figcaption>{caption}</figcaption></figure>')
+
+    def csv(self, name: str, table: dict) -> str:
+        P.write_table_csv(self.out_dir / name, table)
+        self.files.append(name)
+        return f'<a href="{_e(name)}">{_e(name)}</a>'
+
+    def table(self, header: list, rows: list, cls: str = "") -> None:
+        h = "".join(f"<th>{c}</th>" for c in header)
+        body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
+        self.parts.append(f'<table class="{cls}"><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>')
+
+
+CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:1.5em auto;max-width:1180px;
+color:#222;line-height:1.4;padding:0 1em}
+h1{font-size:1.5em;margin-bottom:.2em} h2{font-size:1.2em;border-bottom:1px solid #ccc;margin-top:2em;padding-bottom:.2em}
+table{border-collapse:collapse;margin:.6em 0;font-size:.88em} th,td{border:1px solid #ccc;padding:.25em .55em;text-align:right}
+th{background:#f1f3f5} td:first-child,th:first-child{text-align:left}
+figure{margin:1em 0} figure img{max-width:100%;border:1px solid #ddd} figcaption{font-size:.86em;color:#444;margin-top:.3em}
+.meta{color:#666;font-size:.85em} .note{background:#fff8e1;border-left:4px solid #f0b400;padding:.4em .7em;font-size:.88em}
+.summary{background:#f6f8fa;border:1px solid #dde;padding:.6em 1em;border-radius:4px}
+.pass{color:#fff;background:#1a7f37;padding:.1em .5em;border-radius:3px;font-weight:bold}
+.fail{color:#fff;background:#cf222e;padding:.1em .5em;border-radius:3px;font-weight:bold}
+.na{color:#fff;background:#6e7781;padding:.1em .5em;border-radius:3px;font-weight:bold}
+nav a{margin-right:.8em;font-size:.88em} .files{font-size:.82em;color:#555}
+"""
+
+
+# ----------------------------------------------------------------------------- sections
+def _summary_section(pg: _Page, run: D.RunData, sc: dict, hd: dict, report_notes: list):
+    ifov = sc["ifov_rad"]
+    pg.html('<div class="summary">')
+    bands = ", ".join(f"{b['name']} ({b['band']}, {b['along_mm']:+.3f} mm)" for b in sc["bands"])
+    pairs = ", ".join(f"{p['name']} τ = {p['tau_s'] * 1e3:.2f} ms ({p['tau_lines']:.1f} lines)" for p in sc["pairs"])
+    desc = f" — {_e(sc['description'])}" if sc.get("description") else ""
+    pg.para(f"<b>Scenario</b> <code>{_e(sc['name'])}</code>{desc}<br>"
+            f"{sc['lines']:,} lines × {sc['columns']:,} columns, line period {sc['line_period_s'] * 1e3:.3f} ms "
+            f"({sc['duration_s']:.3f} s); reference band {_e(sc['reference_band'])}, 1 px = {ifov * URAD:.3f} µrad."
+            f"<br><b>Bands</b> (along-track position): {_e(bands)}"
+            f"<br><b>Pairs</b> {'used by the restoration' if run.restoration is not None else '(nominal delays)'}: "
+            f"{_e(pairs) or '—'}")
+    if run.restoration is not None:
+        opts = sc.get("integration_options") or {}
+        pg.para(f"<b>Restoration</b>: integration <code>{_e(sc['method'])}</code>"
+                f"{(' (' + _e(json.dumps(opts)) + ')') if opts else ''}, {sc.get('iterations') or '?'} iteration(s), "
+                f"axes {', '.join(sc['restored_axes']) or '—'}"
+                f"{'; anchored on star tracker' if sc.get('anchored') else ''}.")
+    # verdict
+    if hd["passed"] is True:
+        badge = '<span class="pass">PASS</span>'
+    elif hd["passed"] is False:
+        badge = '<span class="fail">FAIL</span>'
+    else:
+        badge = '<span class="na">N/A</span>'
+    req = hd["requirement"]
+    req_txt = ", ".join(f"{k.replace('max_', '').replace('_px', '').replace('p997', '99.7 %').upper()} ≤ {v:g} px"
+                        for k, v in req.items()) or "none"
+    pg.para(f"<b>Requirement</b> (scenario.requirement): {_e(req_txt)} — {badge} {_e(hd['verdict'])}")
+    # headline table
+    rows = []
+    have_truth = run.truth is not None
+    for a in D.AXES:
+        d = hd["axes"][a]
+        tag = "" if d.get("restored", True) or run.restoration is None else " (not restored)"
+        if have_truth and run.restoration is not None:
+            rows.append([f"{a}{tag}", _fmt(d.get("rms_px")), _fmt(d.get("p997_px")), _fmt(d.get("rms_urad")),
+                         _fmt(d.get("p997_urad")), _fmt(d.get("knowledge_rms_px")), _fmt(d.get("knowledge_p997_px")),
+                         _fmt(d.get("knowledge_rms_urad")), _fmt(d.get("knowledge_p997_urad")),
+                         _fmt(d.get("improvement_rms"), 3), f"{d.get('coverage', float('nan')) * 100:.1f} %"])
+        elif have_truth:
+            rows.append([a, _fmt(d.get("knowledge_rms_px")), _fmt(d.get("knowledge_p997_px")),
+                         _fmt(d.get("knowledge_rms_urad")), _fmt(d.get("knowledge_p997_urad"))])
+        elif run.restoration is not None:
+            rows.append([f"{a}{tag}", _fmt(d.get("correction_rms_px")), _fmt(d.get("correction_rms_urad")),
+                         f"{d.get('coverage', float('nan')) * 100:.1f} %"])
+    if have_truth and run.restoration is not None:
+        pg.table(["axis", "restored RMS [px]", "restored 99.7 % [px]", "RMS [µrad]", "99.7 % [µrad]",
+                  "AOCS RMS [px]", "AOCS 99.7 % [px]", "AOCS RMS [µrad]", "AOCS 99.7 % [µrad]",
+                  "improvement (RMS)", "coverage"], rows)
+        pg.para("Error = estimate − truth over the estimated lines, mean removed (DESIGN.md); AOCS = the uncorrected "
+                "knowledge on the same lines; improvement = AOCS RMS / restored RMS.", "meta")
+    elif have_truth:
+        pg.table(["axis", "AOCS RMS [px]", "AOCS 99.7 % [px]", "AOCS RMS [µrad]", "AOCS 99.7 % [µrad]"], rows)
+    elif rows:
+        pg.table(["axis", "correction RMS [px]", "correction RMS [µrad]", "coverage"], rows)
+        pg.para("No truth: accuracy cannot be measured; the table gives the size of the applied correction.", "meta")
+    for n in run.notes + report_notes:
+        pg.note(_e(n))
+    pg.html("</div>")
+
+
+def _attitude_section(pg: _Page, run: D.RunData, sc: dict, hd: dict):
+    att = D.attitude_table(run)
+    pg.section("attitude", "Attitude over time")
+    valid = None
+    if run.restoration is not None:
+        valid = np.all([np.isfinite(att[f"restored_{a}"]) for a in (sc["restored_axes"] or D.AXES)], axis=0)
+    zoom = D.zoom_window(att["time_s"], valid, duration_s=0.05)
+    table = {"line": att["line"], "time_s": att["time_s"]}
+    for a in D.AXES:
+        for k in ("true", "knowledge", "restored", "correction", "delta", "error", "knowledge_error"):
+            key = f"{k}_{a}"
+            if key in att:
+                table[f"{key}_urad"] = att[key] * URAD
+    link = pg.csv("attitude.csv", table)
+    for a in D.AXES:
+        fig, axs = RP.attitude_figure()
+        RP.draw_attitude(axs, att, a, ifov_rad=sc["ifov_rad"], zoom=zoom,
+                         restored=(a in sc["restored_axes"]) or run.restoration is None)
+        extra = ""
+        d = hd["axes"][a]
+        if "rms_px" in d:
+            extra = (f" Restored error RMS {d['rms_px']:.4f} px / 99.7 % {d['p997_px']:.4f} px; "
+                     f"AOCS {d['knowledge_rms_px']:.4f} / {d['knowledge_p997_px']:.4f} px.")
+        pg.figure(fig, f"attitude_{a}.png",
+                  f"{a}: true, AOCS knowledge and restored (left: whole record, envelope-decimated; right: "
+                  f"{1e3 * (zoom[1] - zoom[0]):.0f} ms zoom, every line) and errors (mean removed, µrad; px on the "
+                  f"right axis).{extra}")
+    pg.para(f"Data (every line, µrad): {link}", "files")
+
+
+def _spectra_section(pg: _Page, run: D.RunData, sc: dict) -> float:
+    spec = D.spectra(run)
+    pg.section("spectra", "Power spectra")
+    fs = 1.0 / run.line_period_s
+    taus = [p["tau_s"] for p in sc["pairs"]]
+    names = [p["name"] for p in sc["pairs"]]
+    if not spec.get("freq_hz", np.zeros(0)).size:
+        pg.note("Not enough estimated lines for spectra.")
+        return 0.5 * fs
+    ref = next((spec[k] for k in (f"psd_delta_{a}" for a in D.AXES) if k in spec), None)
+    if ref is None:
+        ref = next((spec[k] for k in (f"psd_correction_{a}" for a in D.AXES) if k in spec), None)
+    tot = sum(spec[k] for k in spec if k.startswith("psd_delta_")) if run.truth is not None else ref
+    f_max = RP.nice_f_max(spec["freq_hz"], tot, fs)
+    fig, axs = RP.spectra_figure(3)
+    RP.draw_spectra(axs, spec, taus=taus, pair_names=names, f_max=f_max)
+    table = {"freq_hz": spec["freq_hz"]}
+    for k in sorted(k for k in spec if k.startswith("psd_")):
+        table[f"{k}_urad2_per_hz"] = spec[k] * URAD ** 2
+    link = pg.csv("spectra.csv", table)
+    nps = spec["nperseg"]
+    span = spec.get("span_roll", (0, 0))
+    pg.figure(fig, "spectra.png",
+              f"Welch PSDs (Hann, {nps} lines per segment = {nps * run.line_period_s * 1e3:.0f} ms, "
+              f"{fs / nps:.2f} Hz resolution, 50 % overlap) over the longest fully estimated stretch "
+              f"(lines {span[0]}–{span[1]}). Triangles: blind frequencies n/τ of each pair "
+              f"(a pair alone cannot see them).")
+    pg.para(f"Data (full frequency range up to {fs / 2:.0f} Hz): {link}", "files")
+    return f_max
+
+
+def _transfer_section(pg: _Page, run: D.RunData, sc: dict, f_max: float, integrate, why_not: str,
+                      max_integration_s: float, report_notes: list):
+    pg.section("transfer", "Transfer function of the integration")
+    taus = [p["tau_s"] for p in sc["pairs"]]
+    names = [p["name"] for p in sc["pairs"]]
+    if run.restoration is None:
+        pg.note("No restoration: no integration to show.")
+        return
+    method = sc["method"]
+    opts = dict(sc.get("integration_options") or {})
+    probe = None
+    if integrate is not None:
+        per_call = _integration_call_s(run)
+        if per_call * (len(taus) + 1) * 2 > max_integration_s:
+            report_notes.append(f"integration transfer not probed: ~{per_call * (len(taus) + 1) * 2:.0f} s expected")
+        else:
+            probe = D.integration_probe(taus, run.line_period_s, run.time.size, integrate=integrate, method=method,
+                                        options=opts, pair_names=names)
+            for label, msg in probe["errors"].items():
+                pg.note(_e(f"integrating {label} alone failed: {msg}" if label != "fused"
+                           else f"integrating all pairs failed: {msg}"))
+    else:
+        pg.note(_e(f"The integration cannot be re-run ({why_not}); only the analytic Wiener reference is drawn."))
+    k = D.wiener_k(opts)
+    analytic = None
+    f = probe["freq_hz"] if probe is not None and probe["freq_hz"].size else np.linspace(0, 0.5 / run.line_period_s, 2049)
+    if k is not None or probe is None:
+        kk = k if k is not None else 0.1
+        analytic = {"freq_hz": f, "k": kk, "gain_joint": D.analytic_joint_gain(f, taus, kk)}
+        for j, n in enumerate(names):
+            analytic[f"gain_{n}"] = D.analytic_chain_gain(f, taus[j], kk)
+        if k is None:
+            pg.note("No Wiener k in the integration options: the analytic reference uses k = 0.1 for illustration.")
+    measured = D.measured_transfer(run)
+    fig, ax = RP.transfer_figure()
+    RP.draw_transfer(ax, probe=probe, measured=measured, taus=taus, pair_names=names, f_max=f_max,
+                     analytic=analytic, method=method or "")
+    links = []
+    t1 = {"freq_hz": f}
+    if probe is not None:
+        t1["gain_fused"] = probe["gain_fused"]
+        t1["phase_fused_deg"] = probe["phase_fused_deg"]
+        for n in names:
+            t1[f"gain_{D.pair_file_tag(n)}"] = probe[f"gain_{n}"]
+    if analytic is not None:
+        t1["analytic_joint_wiener_gain"] = analytic["gain_joint"]
+        for n in names:
+            t1[f"analytic_wiener_gain_{D.pair_file_tag(n)}"] = analytic[f"gain_{n}"]
+    links.append(pg.csv("transfer_integration.csv", t1))
+    if measured:
+        t2 = {"freq_hz": measured["freq_hz"]}
+        for a in D.AXES:
+            if f"gain_{a}" in measured:
+                for key in ("gain", "phase", "coherence", "psd_delta", "significant"):
+                    src = f"{key}_{a}_deg" if key == "phase" else f"{key}_{a}"
+                    col = measured[src]
+                    if key == "psd_delta":
+                        t2[f"psd_delta_{a}_urad2_per_hz"] = col * URAD ** 2
+                    elif key == "significant":
+                        t2[f"significant_{a}"] = col.astype(int)
+                    else:
+                        t2[src] = col
+        links.append(pg.csv("transfer_measured.csv", t2))
+    cap = ("Chain gain |θ̂/θ|. Lines: the integration actually used, probed by re-running it on a band-limited random "
+           "attitude with exact differentials (each pair alone, thin; all pairs fused, thick)")
+    if analytic is not None:
+        cap += f"; dotted/dashed: analytic Wiener F_k = 2(1−cos ωτ)/(2(1−cos ωτ)+k), k = {analytic['k']:g}"
+    if measured:
+        cap += ("; markers: measured transfer of the whole chain, Welch cross-spectrum of the restored correction "
+                "with the true − knowledge attitude over its PSD, at the frequencies where the truth has power")
+    elif run.truth is None:
+        cap += "; the measured chain transfer needs truth"
+    pg.figure(fig, "transfer.png", cap + ".")
+    pg.para("Data: " + ", ".join(links), "files")
+
+
+def _integration_call_s(run: D.RunData) -> float:
+    try:
+        tim = json.loads(str(run.restoration.attrs.get("timings", "{}")))
+        it = int(run.settings.get("iterations") or 1)
+        nax = max(1, len(D.restored_axes(run)))
+        return float(tim.get("integration_s", 0.0)) / (it * nax)
+    except (ValueError, TypeError, AttributeError):
+        return 0.0
+
+
+def _budget_section(pg: _Page, run: D.RunData, integrate, max_integration_s: float) -> dict:
+    pg.section("budget", "Error budget")
+    if run.restoration is None:
+        pg.note("No restoration: no budget.")
+        return {}
+    bud = D.error_budget(run, integrate=integrate, max_seconds=max_integration_s)
+    rows = bud["rows"]
+    if rows:
+        trs = []
+        for r in rows:
+            strong = r["component"].startswith("total")
+            b = (lambda s: f"<b>{s}</b>") if strong else (lambda s: s)
+            trs.append([b(_e(r["axis"])), b(_e(r["component"])), b(_fmt(r["rms_px"])), b(_fmt(r["p997_px"])),
+                        b(_fmt(r["rms_urad"])), b(_fmt(r["p997_urad"])), _e(r.get("note", ""))])
+        pg.table(["axis", "component", "RMS [px]", "99.7 % [px]", "RMS [µrad]", "99.7 % [µrad]", "how"], trs)
+        fig, ax = P.new_axes(figsize=(10.0, 1.3 + 1.2 * len({r['axis'] for r in rows})))
+        RP.draw_budget(ax, rows)
+        pg.figure(fig, "budget.png", "Error budget per axis (log scale).")
+    pg.para("Matching noise: white noise with the per-line formal σ of the differentials (scatter of the inlier "
+            "residuals) propagated through the same integration. Measurement: measured − true differentials "
+            "(truth θ(t+τ) − θ(t) of true − knowledge, minus the previous iterations' estimate) integrated; "
+            "model / synthesis = the part of it the matching noise does not explain (quadrature). Integration: the "
+            "true differentials integrated minus the truth (blind frequencies, regularisation, ends). All errors "
+            "over the estimated lines, mean removed; 99.7 % figures combine in quadrature only approximately.",
+            "meta")
+    for n in bud["notes"]:
+        pg.note(_e(n))
+    table = {k: [r.get(k, "") for r in rows] for k in ("axis", "component", "rms_px", "p997_px", "rms_urad",
+                                                        "p997_urad", "n", "note")}
+    links = [pg.csv("budget.csv", table)] if rows else []
+    drows = bud["differential_rows"]
+    if drows:
+        keys = ["pair", "axis", "tau_s", "lines", "matching_sigma_urad", "meas_minus_true_rms_urad",
+                "model_rms_urad", "meas_minus_true_mean_urad", "matching_sigma_px", "meas_minus_true_rms_px",
+                "model_rms_px"]
+        keys = [k for k in keys if any(k in r for r in drows)]
+        trs = [[_e(r["pair"]), _e(r["axis"]), _fmt(r["tau_s"] * 1e3), _fmt(r["lines"])] +
+               [_fmt(r.get(k, float("nan"))) for k in keys[4:]] for r in drows]
+        hdr = ["pair", "axis", "τ [ms]", "lines"] + [k.replace("_urad", " [µrad]").replace("_px", " [px]")
+                                                     .replace("_", " ") for k in keys[4:]]
+        pg.html("<p><b>Differential level</b> (per pair, before integration):</p>")
+        pg.table(hdr, trs)
+        links.append(pg.csv("budget_differentials.csv", {k: [r.get(k, float("nan")) for r in drows] for k in keys}))
+    if links:
+        pg.para("Data: " + ", ".join(links), "files")
+    return bud
+
+
+def _matches_section(pg: _Page, run: D.RunData):
+    pg.section("matches", "Matches on the image and misregistration")
+    dens = D.match_density(run)
+    if not dens:
+        pg.note("No matches in the restoration.")
+    else:
+        fig, axs = RP.match_density_figure(len(dens))
+        for ax, (name, d) in zip(axs, dens.items()):
+            RP.draw_match_density(ax, d, name)
+        axs[-1].set_xlabel("line of the ahead band (time →)")
+        pg.figure(fig, "matches.png",
+                  "Density of inlier matches per pair over the image of the ahead band (line horizontal); "
+                  "red dots: rejected candidates (failed quality or rejected by the 3σ synthesis; at most 4000 "
+                  "drawn); grey bands: lines without differential (gaps).")
+        links = []
+        for name, d in dens.items():
+            le, ce = d["line_edges"], d["col_edges"]
+            L0, C0 = np.meshgrid(le[:-1], ce[:-1], indexing="ij")
+            L1, C1 = np.meshgrid(le[1:], ce[1:], indexing="ij")
+            links.append(pg.csv(f"matches_{D.pair_file_tag(name)}.csv",
+                                {"line_lo": L0.ravel(), "line_hi": L1.ravel(), "col_lo": C0.ravel(),
+                                 "col_hi": C1.ravel(), "inliers": d["inliers"].ravel().astype(int),
+                                 "rejected": d["rejected"].ravel().astype(int)}))
+        gp, g0, g1 = [], [], []
+        for name, d in dens.items():
+            for a, b in d["gap_intervals"]:
+                gp.append(name)
+                g0.append(a)
+                g1.append(b)
+        links.append(pg.csv("gaps.csv", {"pair": gp, "first_line": g0, "stop_line": g1}))
+        rows = [[_e(n), _fmt(d["n_total"]), _fmt(d["n_valid"]), _fmt(d["n_inlier"]), _fmt(d["n_rejected_valid"]),
+                 _fmt(d["n_invalid"]), _fmt(sum(b - a for a, b in d["gap_intervals"]))] for n, d in dens.items()]
+        pg.table(["pair", "candidates", "valid", "inliers", "rejected by synthesis", "failed matching",
+                  "gap lines"], rows)
+        pg.para("Data (counts per bin): " + ", ".join(links), "files")
+    mis = D.misregistration_rows(run)
+    if mis:
+        fig, ax = P.new_axes(figsize=(8.0, 3.8))
+        RP.draw_misregistration(ax, mis)
+        pg.figure(fig, "misregistration.png",
+                  "Band-to-band misregistration: RMS over lines of the per-line mean shift between bands, before "
+                  "correction (raw images) and after (images resampled with the restored attitude), from "
+                  "restoration.nc.", width=800)
+        pg.table(["pair", "before [px]", "after [px]", "before line/col [px]", "after line/col [px]", "lines",
+                  "improvement"],
+                 [[_e(r["pair"]), _fmt(r["before_px"]), _fmt(r["after_px"]),
+                   f"{_fmt(r['before_line_px'])} / {_fmt(r['before_col_px'])}",
+                   f"{_fmt(r['after_line_px'])} / {_fmt(r['after_col_px'])}", _fmt(r["lines"]),
+                   _fmt(r["improvement"], 3)] for r in mis])
+        link = pg.csv("misregistration.csv", {k: [r[k] for r in mis] for k in mis[0]})
+        pg.para(f"Data: {link}", "files")
+    elif run.restoration is not None:
+        pg.note("No misregistration figures in restoration.nc (image correction disabled?).")
+
+
+def _scene_section(pg: _Page, run: D.RunData, mode: str, timeout_s: float, report_notes: list):
+    pg.section("scene", "3-D scene: terrain and band footprints")
+    try:
+        scene = D.scene_geometry(run)
+    except Exception as e:  # geometry failure must not sink the report
+        pg.note(_e(f"Footprints could not be computed ({type(e).__name__}: {e})."))
+        return
+    names = list(scene["footprints"])
+    rows = {"band": [], "x_m": [], "y_m": [], "z_m": []}
+    for b, g in scene["footprints"].items():
+        rows["band"] += [b] * len(g)
+        rows["x_m"] += list(g[:, 0])
+        rows["y_m"] += list(g[:, 1])
+        rows["z_m"] += list(g[:, 2])
+    link = pg.csv("footprints.csv", rows)
+    why = ""
+    done = False
+    if mode in ("auto", "pyvista"):
+        png = pg.out_dir / "scene3d.png"
+        try:
+            _render_pyvista_subprocess(scene, png, timeout_s=timeout_s)
+            pg.png_file(png, f"Terrain ({scene['dem_source']}, vertical ×{scene['z_exaggeration']:.1f}) and the "
+                             f"ground footprints of {', '.join(names)} by the product's sensor model (knowledge "
+                             "attitude), rendered with PyVista off screen.")
+            done = True
+        except Exception as e:
+            why = f"PyVista rendering failed ({type(e).__name__}: {str(e).strip().splitlines()[-1] if str(e).strip() else ''})"
+    elif mode == "matplotlib":
+        why = "matplotlib requested"
+    if not done and mode != "none":
+        fig, ax = RP.scene_figure_mpl()
+        RP.draw_scene_mpl(ax, scene, note="matplotlib fallback")
+        if why and mode != "matplotlib":
+            pg.note(_e(why + "; drawn with matplotlib instead."))
+            report_notes.append(why)
+        pg.figure(fig, "scene3d.png", f"Terrain ({scene['dem_source']}, vertical ×{scene['z_exaggeration']:.1f}) "
+                                      f"and the ground footprints of {', '.join(names)} (matplotlib 3-D"
+                                      f"{'' if mode == 'matplotlib' else ', fallback'}).", width=900)
+    pg.para(f"Footprint outlines (m, local frame): {link}", "files")
+
+
+def _render_pyvista_subprocess(scene: dict, png: Path, *, timeout_s: float):
+    """Render with PyVista in a child process (a VTK crash or hang cannot take the report down)."""
+    root = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory(prefix="simsat_scene_") as tmp:
+        npz = Path(tmp) / "scene.npz"
+        arrays = {"x": scene["x"], "y": scene["y"], "z": scene["z"],
+                  "z_exaggeration": np.array(scene["z_exaggeration"])}
+        arrays.update({f"fp_{b}": g for b, g in scene["footprints"].items()})
+        np.savez(npz, **arrays)
+        out = Path(tmp) / "scene.png"
+        env = dict(os.environ)
+        env["PYTHONPATH"] = str(root) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        r = subprocess.run([sys.executable, "-m", "reports.report_plots", str(npz), str(out)], cwd=str(root),
+                           env=env, capture_output=True, text=True, timeout=timeout_s)
+        if r.returncode != 0 or not out.exists() or out.stat().st_size == 0:
+            msg = (r.stderr or r.stdout or "").strip().splitlines()
+            msg = [m for m in msg if m.strip()]
+            raise RuntimeError(msg[-1] if msg else f"exit status {r.returncode}")
+        P.atomic_write_bytes(png, out.read_bytes())
+
+
+# ----------------------------------------------------------------------------- entry point
+def make_run_report(run_dir, *, out_dir=None, integrator: Callable | None = None, scene_3d: str = "auto",
+                    max_integration_s: float = 120.0, pyvista_timeout_s: float = 90.0) -> Path:
+    """Write the HTML report of a run.
+
+    Parameters
+    ----------
+    run_dir : path
+        Run directory (``product.nc`` required; ``restoration.nc``, ``truth.nc``,
+        ``run.json`` used when present).
+    out_dir : path, optional
+        Report directory (default ``RUN_DIR/report``); receives ``index.html``,
+        the PNGs, the CSVs of the plotted data and ``report.json``.
+    integrator : callable, optional
+        Integration function with the signature of
+        ``restore.integration.integrate`` (default: that function when
+        importable). Re-run to probe the transfer function and split the error
+        budget; without one those parts are reduced (the page says so).
+    scene_3d : {"auto", "pyvista", "matplotlib", "none"}
+        3-D view renderer; ``auto`` tries PyVista off screen (child process)
+        and falls back on matplotlib.
+    max_integration_s : float
+        Skip re-running the integration when the run's own timings predict it
+        would take longer than this [s].
+    pyvista_timeout_s : float
+        Time limit of the PyVista child process [s].
+
+    Returns
+    -------
+    Path
+        Path of ``index.html``.
+    """
+    if scene_3d not in ("auto", "pyvista", "matplotlib", "none"):
+        raise ValueError(f"scene_3d: must be auto, pyvista, matplotlib or none; got {scene_3d!r}")
+    t_start = _time.perf_counter()
+    run_dir = Path(run_dir)
+    out = Path(out_dir) if out_dir is not None else run_dir / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    timings = {}
+    t = _time.perf_counter()
+    run = D.load_run(run_dir)
+    timings["load_s"] = _time.perf_counter() - t
+    integrate, why_not = D.get_integrator(integrator)
+    if run.restoration is not None and integrate is None:
+        run.notes.append(f"The integration cannot be re-run ({why_not}): the transfer is analytic and the budget "
+                         "is given at the differential level.")
+    sc = D.scenario_summary(run)
+    hd = D.headline(run)
+    pg = _Page(out)
+    report_notes: list = []
+
+    t = _time.perf_counter()
+    _attitude_section(pg, run, sc, hd)
+    timings["attitude_s"] = _time.perf_counter() - t
+    t = _time.perf_counter()
+    f_max = _spectra_section(pg, run, sc)
+    timings["spectra_s"] = _time.perf_counter() - t
+    t = _time.perf_counter()
+    _transfer_section(pg, run, sc, f_max, integrate, why_not, max_integration_s, report_notes)
+    timings["transfer_s"] = _time.perf_counter() - t
+    t = _time.perf_counter()
+    bud = _budget_section(pg, run, integrate, max_integration_s)
+    timings["budget_s"] = _time.perf_counter() - t
+    t = _time.perf_counter()
+    _matches_section(pg, run)
+    timings["matches_s"] = _time.perf_counter() - t
+    t = _time.perf_counter()
+    _scene_section(pg, run, scene_3d, pyvista_timeout_s, report_notes)
+    timings["scene_s"] = _time.perf_counter() - t
+    body = pg.parts
+    # summary goes first: build it separately
+    top = _Page(out)
+    _summary_section(top, run, sc, hd, report_notes)
+    timings["total_s"] = _time.perf_counter() - t_start
+
+    summary_tab = {"axis": list(D.AXES)}
+    keys = sorted({k for a in D.AXES for k in hd["axes"][a] if k != "restored"})
+    for k in keys:
+        summary_tab[k] = [hd["axes"][a].get(k, float("nan")) for a in D.AXES]
+    summary_tab["restored"] = [int(hd["axes"][a].get("restored", False)) for a in D.AXES]
+    link = top.csv("summary.csv", summary_tab)
+    report_json = {"run_dir": str(run_dir), "scenario": sc, "headline": hd,
+                   "budget": bud.get("rows", []) if bud else [], "timings": timings,
+                   "notes": run.notes + report_notes,
+                   "generated": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+    P.atomic_write_bytes(out / "report.json",
+                         (json.dumps(report_json, indent=2, default=_json_default) + "\n").encode())
+    nav = " ".join(f'<a href="#{a}">{_e(ti)}</a>' for a, ti in pg.toc)
+    gen = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    page = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
+            f"<title>simsat report — {_e(sc['name'])}</title>", f"<style>{CSS}</style></head><body>",
+            f"<h1>simsat run report — {_e(sc['name'])}</h1>",
+            f'<p class="meta">Run <code>{_e(run_dir.resolve())}</code> · generated {gen} in '
+            f"{timings['total_s']:.1f} s · files: product.nc{', restoration.nc' if run.restoration is not None else ''}"
+            f"{', truth.nc' if run.truth is not None else ''} · summary data: {link}, "
+            f'<a href="report.json">report.json</a></p>',
+            f"<nav>{nav}</nav>"] + top.parts + body + [
+            f'<p class="meta">Report timings: ' + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()) + "</p>",
+            "</body></html>"]
+    index = out / "index.html"
+    P.atomic_write_bytes(index, "\n".join(page).encode("utf-8"))
+    return index
