@@ -26,7 +26,7 @@ __all__ = ["pair_color", "attitude_figure", "draw_attitude", "spectra_figure", "
 
 URAD = 1e6
 AXIS_MARKERS = {"roll": "o", "pitch": "s", "yaw": "^"}
-C_TRUE, C_KNOW, C_REST, C_ERR = "#000000", "#E69F00", "#0072B2", "#D55E00"
+C_TRUE, C_KNOW, C_REST, C_ERR, C_MEAS = "#000000", "#E69F00", "#0072B2", "#D55E00", "#8E0152"
 
 
 def pair_color(j: int) -> str:
@@ -85,8 +85,8 @@ def draw_attitude(axs, att: dict, axis: str, *, ifov_rad: float, zoom: tuple, ma
     t0 = t[0]
     series_top = [(f"true_{axis}", "true", C_TRUE, 1.0), (f"knowledge_{axis}", "knowledge (AOCS)", C_KNOW, 1.3),
                   (f"restored_{axis}", "restored", C_REST, 1.0)]
-    series_err = [(f"knowledge_error_{axis}", "knowledge − true", C_KNOW, 1.0),
-                  (f"error_{axis}", "restored − true", C_ERR, 1.0)]
+    series_err = [(f"knowledge_error_{axis}", "error of knowledge (knowledge − true)", C_KNOW, 1.0),
+                  (f"error_{axis}", "error of restored (restored − true)", C_REST, 1.0)]
     z0, z1 = zoom
     zsel = (t >= z0) & (t <= z1)
     for col in (0, 1):
@@ -109,15 +109,21 @@ def draw_attitude(axs, att: dict, axis: str, *, ifov_rad: float, zoom: tuple, ma
     axs[1, 0].set_ylabel("error [µrad]")
     axs[1, 0].set_xlabel("time since first line [ms]")
     axs[1, 1].set_xlabel("time since first line [ms]")
+    axs[1, 0].axhline(0.0, color="0.5", lw=0.6)
     axs[0, 0].set_title(f"{axis}: whole acquisition" + ("" if restored else " (axis not restored)"))
     axs[0, 1].set_title(f"zoom {1e3 * (z1 - z0):.0f} ms")
     if axs[0, 1].lines:
         axs[0, 0].axvspan((z0 - t0) * 1e3, (z1 - t0) * 1e3, color="0.85", zorder=0, lw=0)
     for ax in (axs[0, 1], axs[1, 1]):
         _px_axis(ax, ifov_rad)
+    handles, labels = [], []
     for ax in (axs[0, 0], axs[1, 0]):
-        if ax.lines:
-            ax.legend(loc="upper left", ncols=3, fontsize=8)
+        h, lab = ax.get_legend_handles_labels()
+        handles += h
+        labels += lab
+    if handles:
+        axs[0, 0].figure.legend(handles, labels, loc="outside lower center", ncols=min(5, len(handles)),
+                                frameon=False)
     return axs[0, 0].figure
 
 
@@ -145,6 +151,9 @@ def draw_spectra(axs, spec: dict, *, taus, pair_names, f_max: float, axes=AXES):
                 ax.semilogy(f[sel], spec[k][sel] * URAD ** 2, color=color, ls=ls, lw=1.1, label=label)
         _mark_pairs(ax, taus, pair_names, f_max)
         ax.set_ylabel(f"{a} PSD\n[µrad²/Hz]")
+        if not any(k == f"psd_correction_{a}" and np.nanmax(spec[k]) > 0 for k in spec) and \
+                f"psd_delta_{a}" in spec and any(k.startswith("psd_correction_") for k in spec):
+            ax.set_title(f"{a}: not restored", fontsize=9, loc="left")
         ax.set_xlim(0, f_max)
         if not ax.lines:
             ax.text(0.5, 0.5, "no data", transform=ax.transAxes, ha="center", va="center")
@@ -155,13 +164,15 @@ def draw_spectra(axs, spec: dict, *, taus, pair_names, f_max: float, axes=AXES):
 
 
 # ----------------------------------------------------------------------------- transfer
-def transfer_figure():
-    return P.new_axes(figsize=(10.0, 5.6))
+def transfer_figure(n_axes: int = 1):
+    """One panel per restored axis (the filter of an adaptive method differs between axes)."""
+    n = max(1, n_axes)
+    return P.new_axes_grid(n, figsize=(10.0, 2.9 * n + 1.9), sharex=True)
 
 
 def draw_transfer(ax, *, probe: dict | None, measured: dict | None, taus, pair_names, f_max: float,
-                  analytic: dict | None = None, method: str = ""):
-    """|F| of the integration per pair and fused, and the measured chain transfer per axis."""
+                  analytic: dict | None = None, method: str = "", axis: str | None = None, legend: bool = True):
+    """|F| of the integration per pair and fused, and the measured chain transfer of ``axis`` (all axes if None)."""
     if probe and probe.get("freq_hz") is not None and probe["freq_hz"].size:
         f = probe["freq_hz"]
         sel = (f > 0) & (f <= f_max)
@@ -169,45 +180,51 @@ def draw_transfer(ax, *, probe: dict | None, measured: dict | None, taus, pair_n
             g = probe.get(f"gain_{name}")
             if g is not None and np.isfinite(g).any():
                 ax.plot(f[sel], g[sel], color=pair_color(j), lw=1.0, alpha=0.85,
-                        label=f"|F| {name} alone (τ = {taus[j] * 1e3:.1f} ms)")
+                        label=f"|F| {name} alone (τ = {taus[j] * 1e3:.1f} ms), probed")
         g = probe.get("gain_fused")
         if g is not None and np.isfinite(g).any():
-            ax.plot(f[sel], g[sel], color="k", lw=2.0, label=f"|F| fused, {method} (probed)")
+            ax.plot(f[sel], g[sel], color="k", lw=2.0, label=f"|F| all pairs fused ({method}), probed")
+    have_probe = bool(probe and probe.get("freq_hz") is not None and probe["freq_hz"].size)
     if analytic:
         f = analytic["freq_hz"]
         sel = (f > 0) & (f <= f_max)
         for j, name in enumerate(pair_names):
-            if f"gain_{name}" in analytic:
+            if f"gain_{name}" in analytic and not have_probe:
                 ax.plot(f[sel], analytic[f"gain_{name}"][sel], color=pair_color(j), lw=0.9, ls=":",
-                        label=(f"analytic Wiener F_k, k = {analytic['k']:g}" if j == 0 else None))
+                        label=(f"analytic, each pair ({analytic['label']})" if j == 0 else None))
         if "gain_joint" in analytic:
             ax.plot(f[sel], analytic["gain_joint"][sel], color="0.35", lw=1.2, ls="--",
-                    label=f"analytic joint Wiener, k = {analytic['k']:g}")
-    if measured:
+                    label=f"analytic, fused ({analytic['label']})")
+    if measured and measured.get("freq_hz") is not None:
         f = measured["freq_hz"]
-        for a in AXES:
+        for a in AXES if axis is None else (axis,):
             if f"gain_{a}" not in measured:
                 continue
             s = measured[f"significant_{a}"] & (f > 0) & (f <= f_max)
             ax.plot(f[s], measured[f"gain_{a}"][s], ls="none", marker=AXIS_MARKERS[a], markersize=4.5,
-                    markerfacecolor="white", markeredgecolor=C_ERR, markeredgewidth=1.1,
-                    label=f"measured chain, {a} (correction / true−knowledge)")
+                    markerfacecolor="white", markeredgecolor=C_MEAS, markeredgewidth=1.1,
+                    label=f"measured whole chain, {a}")
     _mark_pairs(ax, taus, pair_names, f_max)
     ax.axhline(1.0, color="0.6", lw=0.8)
     ax.set_xlim(0, f_max)
-    ymax = 1.25
-    if measured:
-        vals = [measured[f"gain_{a}"][measured[f"significant_{a}"]] for a in AXES if f"gain_{a}" in measured]
-        vals = np.concatenate(vals) if vals else np.zeros(0)
-        vals = vals[np.isfinite(vals)]
-        if vals.size:
-            ymax = float(np.clip(np.max(vals) * 1.1, 1.25, 3.0))
+    vals = [ln.get_ydata() for ln in ax.lines]
+    vals = np.concatenate([np.asarray(v, float).ravel() for v in vals]) if vals else np.zeros(0)
+    vals = vals[np.isfinite(vals)]
+    ymax = float(np.clip(np.max(vals) * 1.08, 1.25, 3.0)) if vals.size else 1.25
     ax.set_ylim(0, ymax)
-    ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("|θ̂ / θ|  (chain gain)")
-    if not ax.lines[1:]:
+    ax.set_ylabel(f"{axis + ': ' if axis else ''}|θ̂ / θ|")
+    if len(ax.lines) <= 1:
         ax.text(0.5, 0.5, "no transfer available", transform=ax.transAxes, ha="center")
-    P.legend_below(ax, ncols=2)
+    if legend:
+        ax.set_xlabel("frequency [Hz]")
+        handles, labels, seen = [], [], set()
+        for other in ax.figure.axes:
+            for h, lab in zip(*other.get_legend_handles_labels()):
+                if lab not in seen:
+                    seen.add(lab)
+                    handles.append(h)
+                    labels.append(lab)
+        ax.figure.legend(handles, labels, loc="outside lower center", ncols=2, frameon=False)
     return ax.figure
 
 
@@ -257,9 +274,12 @@ def draw_match_density(ax, d: dict, name: str, *, show_rejected: bool = True, co
     m = ax.pcolormesh(le, ce, np.where(dens > 0, dens, np.nan), cmap="viridis", shading="flat", rasterized=True)
     for k, (g0, g1) in enumerate(d["gap_intervals"]):
         ax.axvspan(g0, g1, color="0.6", alpha=0.45, lw=0, label="lines without differential" if k == 0 else None)
+    if show_rejected and d.get("failed_lines") is not None and d["failed_lines"].size:
+        ax.plot(d["failed_lines"], d["failed_cols"], ls="none", marker=".", markersize=1.6, color="0.55",
+                alpha=0.6, label=f"failed matching ({d['n_invalid']:,})")
     if show_rejected and d["rejected_lines"].size:
-        ax.plot(d["rejected_lines"], d["rejected_cols"], ls="none", marker=".", markersize=2.0, color=C_ERR,
-                alpha=0.7, label=f"rejected ({d['n_total'] - d['n_inlier']:,})")
+        ax.plot(d["rejected_lines"], d["rejected_cols"], ls="none", marker=".", markersize=2.2, color=C_ERR,
+                alpha=0.85, label=f"rejected by synthesis ({d['n_rejected_valid']:,})")
     ax.set_xlim(0, d["n_lines"])
     ax.set_ylim(0, d["n_columns"])
     ax.set_ylabel(f"{name}\ncolumn of {d['ahead']}")
@@ -327,7 +347,7 @@ def draw_scene_mpl(ax, scene: dict, *, note: str = ""):
     return ax.figure
 
 
-def render_scene_pyvista(scene: dict, png_path, *, window_size=(1000, 700)) -> str:
+def render_scene_pyvista(scene: dict, png_path, *, window_size=(1000, 680)) -> str:
     """Render DEM + footprints with PyVista off screen into ``png_path``; returns the path.
 
     Raises whatever VTK raises when no OpenGL context can be made (the caller
@@ -337,18 +357,21 @@ def render_scene_pyvista(scene: dict, png_path, *, window_size=(1000, 700)) -> s
 
     pv.OFF_SCREEN = True
     ex = float(scene["z_exaggeration"])
-    X, Y = np.meshgrid(np.asarray(scene["x"], float), np.asarray(scene["y"], float))
+    x = np.asarray(scene["x"], float)
+    y = np.asarray(scene["y"], float)
+    X, Y = np.meshgrid(x, y)
     Z = np.asarray(scene["z"], float)
     grid = pv.StructuredGrid(X, Y, Z * ex)
     grid["elevation [m]"] = Z.ravel(order="F")
     pl = pv.Plotter(off_screen=True, window_size=list(window_size))
     pl.set_background("white")
-    pl.add_mesh(grid, scalars="elevation [m]", cmap="terrain", show_scalar_bar=True,
-                scalar_bar_args={"title": "elevation [m]", "color": "black", "vertical": True,
-                                 "position_x": 0.88, "position_y": 0.15, "height": 0.6, "width": 0.06})
+    pl.add_mesh(grid, scalars="elevation [m]", cmap="gist_earth", smooth_shading=True, show_scalar_bar=True,
+                scalar_bar_args={"title": "elevation [m]", "color": "black", "vertical": True, "title_font_size": 14,
+                                 "label_font_size": 12, "position_x": 0.9, "position_y": 0.2, "height": 0.55,
+                                 "width": 0.05, "fmt": "%.0f"})
     span = max(np.ptp(X), np.ptp(Y))
-    lift = 0.004 * span
-    labels = []
+    lift = 0.002 * span
+    texts = []
     for j, (band, g) in enumerate(scene["footprints"].items()):
         g = np.asarray(g, float)
         g = g[np.all(np.isfinite(g), axis=1)]
@@ -356,18 +379,20 @@ def render_scene_pyvista(scene: dict, png_path, *, window_size=(1000, 700)) -> s
             continue
         pts = g.copy()
         pts[:, 2] = pts[:, 2] * ex + lift * (1 + j)
-        line = pv.lines_from_points(pts)
         col = pair_color(j)
-        pl.add_mesh(line, color=col, line_width=4)
-        labels.append([f"footprint {band}", col])
-    if labels:
-        pl.add_legend(labels, bcolor="white", border=True, size=(0.22, 0.05 * len(labels) + 0.02), loc="upper left")
-    pl.add_text(f"DEM (x{ex:.1f} vertical) and ground footprints", font_size=10, color="black", position="upper_edge")
-    pl.show_bounds(xtitle="x [m]", ytitle="y [m]", ztitle=f"z x{ex:.1f} [m]", color="black", font_size=9,
-                   grid=False, location="outer", ticks="outside")
-    pl.camera_position = "iso"
-    pl.camera.elevation = -10
-    pl.camera.zoom(1.05)
+        pl.add_mesh(pv.lines_from_points(pts), color=col, line_width=3)
+        texts.append((band, col))
+    for j, (band, col) in enumerate(texts):
+        pl.add_text(f"footprint {band}", position=(12, window_size[1] - 60 - 22 * j), font_size=11, color=col)
+    pl.add_text(f"DEM and band ground footprints (vertical x{ex:.1f})", position="upper_edge", font_size=12,
+                color="black")
+    pl.add_text(f"x along-track: {np.ptp(x) / 1e3:.1f} km, y across-track: {np.ptp(y) / 1e3:.1f} km, "
+                f"relief {np.ptp(Z):.0f} m", position="lower_left", font_size=9, color="black")
+    # look from the south-west, above, along-track axis running left to right
+    c = np.array([x.mean(), y.mean(), float(np.mean(Z)) * ex])
+    d = 1.25 * span
+    pl.camera_position = [tuple(c + np.array([-0.25 * d, -0.9 * d, 0.75 * d])), tuple(c), (0.0, 0.0, 1.0)]
+    pl.reset_camera_clipping_range()
     pl.screenshot(str(png_path))
     pl.close()
     return str(png_path)

@@ -276,71 +276,111 @@ def _transfer_section(pg: _Page, run: D.RunData, sc: dict, f_max: float, integra
     if run.restoration is None:
         pg.note("No restoration: no integration to show.")
         return
-    method = sc["method"]
+    method = sc["method"] or ""
     opts = dict(sc.get("integration_options") or {})
-    probe = None
+    axes = sc["restored_axes"] or list(D.AXES)
+    te = run.line_period_s
+    n = run.time.size
+    probes: dict = {}
+    analytic: dict = {}
+    frozen_any = False
     if integrate is not None:
         per_call = _integration_call_s(run)
-        if per_call * (len(taus) + 1) * 2 > max_integration_s:
-            report_notes.append(f"integration transfer not probed: ~{per_call * (len(taus) + 1) * 2:.0f} s expected")
-        else:
-            probe = D.integration_probe(taus, run.line_period_s, run.time.size, integrate=integrate, method=method,
-                                        options=opts, pair_names=names)
-            for label, msg in probe["errors"].items():
-                pg.note(_e(f"integrating {label} alone failed: {msg}" if label != "fused"
-                           else f"integrating all pairs failed: {msg}"))
+        expected = per_call * (len(taus) + 2) * len(axes)
+        if expected > max_integration_s:
+            report_notes.append(f"integration transfer not probed: ~{expected:.0f} s expected")
+            integrate = None
+            why_not = f"re-running it would take ~{expected:.0f} s"
+    if integrate is not None:
+        shared = None
+        for a in axes:
+            fz = D.axis_integration(run, a, integrate)
+            if fz["error"]:
+                pg.note(_e(f"{a}: re-running the integration failed: {fz['error']}"))
+                continue
+            if not fz["frozen"] and shared is not None:
+                probes[a] = shared
+            else:
+                corr = np.asarray(run.restoration[f"correction_{a}"].values, dtype=np.float64)
+                amp = float(np.nanstd(corr)) if np.isfinite(corr).any() and np.nanstd(corr) > 0 else 1e-6
+                probes[a] = D.integration_probe(taus, te, n, integrate=integrate, method=method or None,
+                                                options=fz["options"], pair_names=names, amplitude_rad=amp)
+                if not fz["frozen"]:
+                    shared = probes[a]
+                for label, msg in probes[a]["errors"].items():
+                    pg.note(_e(f"{a}: integrating {'all pairs' if label == 'fused' else label + ' alone'} "
+                               f"failed: {msg}"))
+            if fz["frozen"]:
+                frozen_any = True
+                f = probes[a]["freq_hz"]
+                an = {"freq_hz": f, "label": "Wiener with the frozen PSD prior and noise",
+                      "gain_joint": D.frozen_chain_gain(f, taus, fz["spectrum"], te)}
+                sig = np.broadcast_to(np.atleast_1d(fz["spectrum"]["noise_std"]), (len(taus),))
+                for j, nm in enumerate(names):
+                    an[f"gain_{nm}"] = D.frozen_chain_gain(f, [taus[j]], {**fz["spectrum"], "noise_std": sig[j:j + 1]},
+                                                           te)
+                analytic[a] = an
     else:
-        pg.note(_e(f"The integration cannot be re-run ({why_not}); only the analytic Wiener reference is drawn."))
+        pg.note(_e(f"The integration cannot be re-run ({why_not}); only an analytic Wiener reference is drawn."))
     k = D.wiener_k(opts)
-    analytic = None
-    f = probe["freq_hz"] if probe is not None and probe["freq_hz"].size else np.linspace(0, 0.5 / run.line_period_s, 2049)
-    if k is not None or probe is None:
+    for a in axes:
+        if a in analytic or (a in probes and k is None):
+            continue
+        f = probes[a]["freq_hz"] if a in probes and probes[a]["freq_hz"].size else \
+            np.fft.rfftfreq(max(n, 4096), te)
         kk = k if k is not None else 0.1
-        analytic = {"freq_hz": f, "k": kk, "gain_joint": D.analytic_joint_gain(f, taus, kk)}
-        for j, n in enumerate(names):
-            analytic[f"gain_{n}"] = D.analytic_chain_gain(f, taus[j], kk)
-        if k is None:
-            pg.note("No Wiener k in the integration options: the analytic reference uses k = 0.1 for illustration.")
+        an = {"freq_hz": f, "label": f"Wiener k = {kk:g}" + ("" if k is not None else ", illustration"),
+              "gain_joint": D.analytic_joint_gain(f, taus, kk)}
+        for j, nm in enumerate(names):
+            an[f"gain_{nm}"] = D.analytic_chain_gain(f, taus[j], kk)
+        analytic[a] = an
     measured = D.measured_transfer(run)
-    fig, ax = RP.transfer_figure()
-    RP.draw_transfer(ax, probe=probe, measured=measured, taus=taus, pair_names=names, f_max=f_max,
-                     analytic=analytic, method=method or "")
+    fig, axs = RP.transfer_figure(len(axes))
+    for i, (ax, a) in enumerate(zip(axs, axes)):
+        RP.draw_transfer(ax, probe=probes.get(a), measured=measured, taus=taus, pair_names=names, f_max=f_max,
+                         analytic=analytic.get(a), method=method, axis=a, legend=(i == len(axes) - 1))
     links = []
-    t1 = {"freq_hz": f}
-    if probe is not None:
-        t1["gain_fused"] = probe["gain_fused"]
-        t1["phase_fused_deg"] = probe["phase_fused_deg"]
-        for n in names:
-            t1[f"gain_{D.pair_file_tag(n)}"] = probe[f"gain_{n}"]
-    if analytic is not None:
-        t1["analytic_joint_wiener_gain"] = analytic["gain_joint"]
-        for n in names:
-            t1[f"analytic_wiener_gain_{D.pair_file_tag(n)}"] = analytic[f"gain_{n}"]
+    f0 = next((p["freq_hz"] for p in probes.values() if p["freq_hz"].size), None)
+    if f0 is None:
+        f0 = next(iter(analytic.values()))["freq_hz"] if analytic else np.zeros(0)
+    t1 = {"freq_hz": f0}
+    for a in axes:
+        if a in probes and probes[a]["freq_hz"].size == f0.size:
+            t1[f"gain_fused_{a}"] = probes[a]["gain_fused"]
+            t1[f"phase_fused_{a}_deg"] = probes[a]["phase_fused_deg"]
+            for nm in names:
+                t1[f"gain_{D.pair_file_tag(nm)}_{a}"] = probes[a][f"gain_{nm}"]
+        if a in analytic and analytic[a]["freq_hz"].size == f0.size:
+            t1[f"analytic_gain_fused_{a}"] = analytic[a]["gain_joint"]
+            for nm in names:
+                t1[f"analytic_gain_{D.pair_file_tag(nm)}_{a}"] = analytic[a][f"gain_{nm}"]
     links.append(pg.csv("transfer_integration.csv", t1))
     if measured:
         t2 = {"freq_hz": measured["freq_hz"]}
         for a in D.AXES:
             if f"gain_{a}" in measured:
-                for key in ("gain", "phase", "coherence", "psd_delta", "significant"):
-                    src = f"{key}_{a}_deg" if key == "phase" else f"{key}_{a}"
-                    col = measured[src]
-                    if key == "psd_delta":
-                        t2[f"psd_delta_{a}_urad2_per_hz"] = col * URAD ** 2
-                    elif key == "significant":
-                        t2[f"significant_{a}"] = col.astype(int)
-                    else:
-                        t2[src] = col
+                t2[f"gain_{a}"] = measured[f"gain_{a}"]
+                t2[f"phase_{a}_deg"] = measured[f"phase_{a}_deg"]
+                t2[f"coherence_{a}"] = measured[f"coherence_{a}"]
+                t2[f"psd_delta_{a}_urad2_per_hz"] = measured[f"psd_delta_{a}"] * URAD ** 2
+                t2[f"significant_{a}"] = measured[f"significant_{a}"].astype(int)
         links.append(pg.csv("transfer_measured.csv", t2))
-    cap = ("Chain gain |θ̂/θ|. Lines: the integration actually used, probed by re-running it on a band-limited random "
-           "attitude with exact differentials (each pair alone, thin; all pairs fused, thick)")
-    if analytic is not None:
-        cap += f"; dotted/dashed: analytic Wiener F_k = 2(1−cos ωτ)/(2(1−cos ωτ)+k), k = {analytic['k']:g}"
+    cap = ("Chain gain |θ̂/θ| per restored axis. Solid lines: the integration actually used "
+           f"(<code>{_e(method)}</code>), probed by re-running it on a band-limited random attitude with exact "
+           "differentials (each pair alone, thin; all pairs fused, thick)")
+    if frozen_any:
+        cap += (". The method adapts its prior to the data, so it was first run on the measured differentials of "
+                "each axis and its PSD prior and noise levels frozen: the curves are the filter that was applied, "
+                "hence one panel per axis; dotted/dashed: the same Wiener filter computed analytically")
+    elif analytic:
+        cap += "; dotted/dashed: analytic Wiener chain gain F_k = 2(1−cos ωτ)/(2(1−cos ωτ)+k)"
     if measured:
-        cap += ("; markers: measured transfer of the whole chain, Welch cross-spectrum of the restored correction "
-                "with the true − knowledge attitude over its PSD, at the frequencies where the truth has power")
+        cap += ("; markers: measured transfer of the whole chain (Welch cross-spectrum of the restored correction "
+                "with true − knowledge, over the PSD of true − knowledge), where the truth has power above the "
+                "uncorrelated part of the correction")
     elif run.truth is None:
         cap += "; the measured chain transfer needs truth"
-    pg.figure(fig, "transfer.png", cap + ".")
+    pg.figure(fig, "transfer.png", cap + ". Triangles: blind frequencies n/τ.")
     pg.para("Data: " + ", ".join(links), "files")
 
 
@@ -414,8 +454,8 @@ def _matches_section(pg: _Page, run: D.RunData):
         axs[-1].set_xlabel("line of the ahead band (time →)")
         pg.figure(fig, "matches.png",
                   "Density of inlier matches per pair over the image of the ahead band (line horizontal); "
-                  "red dots: rejected candidates (failed quality or rejected by the 3σ synthesis; at most 4000 "
-                  "drawn); grey bands: lines without differential (gaps).")
+                  "red dots: matches rejected by the 3σ synthesis, grey dots: candidates whose matching failed "
+                  "(low correlation; at most 3000 of each drawn); grey bands: lines without differential (gaps).")
         links = []
         for name, d in dens.items():
             le, ce = d["line_edges"], d["col_edges"]

@@ -278,31 +278,32 @@ def _gather(image: np.ndarray, l0: np.ndarray, c0: np.ndarray, half_l: int, half
 def _integer_search(a_z, a_norm, region, h, w):
     """NCC of the A windows over every integer offset of the region.
 
-    Returns (N, L - h + 1, C - w + 1); ``-inf`` where B is flat. The loop runs
-    over the handful of offsets; each step is batched over the points. The
-    local sums of B come from one matrix product with a band matrix.
+    Returns (N, L - h + 1, C - w + 1) in the region's dtype; ``-inf`` where B
+    is flat. The loop runs over the handful of offsets, each step batched
+    over the points; the local sums of B come from one matrix product with a
+    band matrix.
     """
     n, nr, nc = region.shape
     kl, kc = nr - h + 1, nc - w + 1
-    num = np.empty((n, kl, kc), dtype=np.float64)
+    num = np.empty((n, kl, kc), dtype=region.dtype)
     for i in range(kl):
         for j in range(kc):
-            num[:, i, j] = np.einsum("nij,nij->n", a_z, region[:, i:i + h, j:j + w])
+            np.einsum("nij,nij->n", a_z, region[:, i:i + h, j:j + w], out=num[:, i, j])
     band = np.zeros((nc, kc), dtype=region.dtype)
     for j in range(kc):
         band[j:j + w, j] = 1.0
+    rows = np.zeros((2, n, kl, nc), dtype=region.dtype)  # line sums of B and B**2
     sq = region * region
-    rows1 = region[:, 0:kl, :].copy()
-    rows2 = sq[:, 0:kl, :].copy()
-    for p in range(1, h):
-        rows1 += region[:, p:p + kl, :]
-        rows2 += sq[:, p:p + kl, :]
-    s1 = (rows1.reshape(-1, nc) @ band).reshape(n, kl, kc).astype(np.float64)
-    s2 = (rows2.reshape(-1, nc) @ band).reshape(n, kl, kc).astype(np.float64)
-    var = np.maximum(s2 - s1 * s1 / (h * w), 0.0)
+    for p in range(h):
+        rows[0] += region[:, p:p + kl]
+        rows[1] += sq[:, p:p + kl]
+    s1, s2 = (rows.reshape(-1, nc) @ band).reshape(2, n, kl, kc)
+    den = np.sqrt(np.maximum(s2 - s1 * s1 * (1.0 / (h * w)), 0.0))
+    den *= a_norm.astype(region.dtype)[:, None, None]
     with np.errstate(divide="ignore", invalid="ignore"):
-        surf = num / (np.sqrt(var) * a_norm[:, None, None])
-    return np.where(np.isfinite(surf), surf, -np.inf)
+        surf = num / den
+    surf[~(den > 0)] = -np.inf
+    return surf
 
 
 def _inv3(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -453,10 +454,13 @@ def match_points(
         if not np.all(np.isfinite(v)):
             raise ValueError(f"{name}: must be finite")
 
+    if n == 0:
+        f, i = np.zeros(0), np.zeros(0, dtype=np.int64)
+        return MatchResult(line_b=f, col_b=f.copy(), quality=f.copy(), valid=np.zeros(0, dtype=bool),
+                           flags=i, std_line=f.copy(), std_col=f.copy())
     opts = dict(h=h, w=w, sl=sl, sc=sc, method=method, min_quality=float(min_quality),
                 max_std=max_std, order=int(order), max_iter=int(max_iter), tol=float(tol))
-    parts = [_match_chunk(*images, *(v[i:i + _CHUNK] for v in pts), **opts)
-             for i in range(0, n, _CHUNK)] or [_match_chunk(*images, *pts, **opts)]
+    parts = [_match_chunk(*images, *(v[i:i + _CHUNK] for v in pts), **opts) for i in range(0, n, _CHUNK)]
     return MatchResult(**{f.name: np.concatenate([p[f.name] for p in parts]) for f in fields(MatchResult)})
 
 
@@ -539,38 +543,38 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
     for it in range(max_iter + 1):
         if active.size == 0:
             break
+        sel = slice(None) if active.size == n else active  # a view while all are active
         if it == 0:  # at the integer peak: no resampling
-            b_res = patch[active, order:order + h, order:order + w]
+            b_res = patch[sel, order:order + h, order:order + w]
         else:
-            b_res = resample_windows(patch[active], d[active, 0], d[active, 1], order=order)
+            b_res = resample_windows(patch[sel], d[sel, 0], d[sel, 1], order=order)
         b_flat = b_res.reshape(-1, npx)
-        c = np.matmul(jac[active], b_flat[:, :, None])[:, :, 0].astype(np.float64)
+        c = np.matmul(jac[sel], b_flat[:, :, None])[:, :, 0].astype(np.float64)
         b_mean = b_flat.mean(axis=1, dtype=np.float64)
         sb = np.einsum("np,np->n", b_flat, b_flat).astype(np.float64) - npx * b_mean**2
-        stats[active] = np.column_stack([c, sb])
+        stats[sel, :3] = c
+        stats[sel, 3] = sb
         if it == max_iter:
             break
         if method == "ncc" or it == 0:
-            gain = c[:, 0] / a_norm2[active]  # gain projected out (variable projection)
-            p = np.einsum("nij,nj->ni", ninv[active], c - gain[:, None] * normal[active, :, 0])
-            safe = np.where(np.abs(gain) > 1e-12, gain, 1.0)
-            f = -p[:, 1:] / safe[:, None]
+            gain = c[:, 0] / a_norm2[sel]  # gain projected out (variable projection)
+            p = np.einsum("nij,nj->ni", ninv[sel, 1:], c - gain[:, None] * normal[sel, :, 0])
+            f = p / -np.where(np.abs(gain) > 1e-12, gain, 1.0)[:, None]
+        ph = f
         if method == "phase":
-            ph = np.column_stack(_phase_shift(fa[active], b_res - b_mean[:, None, None].astype(_F32), grids))
-            if it > 0:
-                f = ph
-        else:
-            ph = f
+            ph = np.column_stack(_phase_shift(fa[sel], b_res - b_mean[:, None, None].astype(_F32), grids))
+            f = ph if it > 0 else f
         # F(d) has its root at the match but a slope that is not exactly -1:
         # secant update of that slope, per point and axis
         if it > 0:
-            dx = d[active] - prev[active, :2]
-            df = prev[active, 2:] - f
+            dx = d[sel] - prev[sel, :2]
             upd = np.abs(dx) > 1e-4
-            kappa[active] = np.where(upd, np.clip(df / np.where(upd, dx, 1.0), 0.2, 2.0), kappa[active])
-        prev[active] = np.column_stack([d[active], ph])
-        step = f / kappa[active]
-        d[active] = np.clip(d[active] + step, -0.999, 0.999)
+            slope = (prev[sel, 2:] - f) / np.where(upd, dx, 1.0)
+            kappa[sel] = np.where(upd, np.clip(slope, 0.2, 2.0), kappa[sel])
+        prev[sel, :2] = d[sel]
+        prev[sel, 2:] = ph
+        step = f / kappa[sel]
+        d[sel] = np.clip(d[sel] + step, -0.999, 0.999)
         done = np.all(np.abs(step) < tol, axis=1)
         converged[active[done]] = True
         active = active[~done]

@@ -32,7 +32,7 @@ import numpy as np
 from simsat.config import ScenarioError, Section
 from simsat.product import Product, atomic_write_dataset, clamped_attitude, read_product
 
-from .synthesis import AXES, highpass_nan, instant_synthesis
+from .synthesis import AXES, fill_short_gaps, highpass_nan, instant_synthesis, window_compensation
 
 __all__ = ["RestorationSettings", "restoration_settings", "restore_product", "restore_run", "RestorationResult",
            "RestorationError", "PairData"]
@@ -48,16 +48,19 @@ class RestorationSettings:
     selection: str = "grid"
     points_per_line: int = 24
     window: tuple = (3, 31)
-    search: tuple = (2, 3)
+    search: tuple = (3, 3)
     match_method: str = "ncc"
     min_quality: float = 0.6
     axes: tuple = ("roll", "pitch")
     n_sigma: float = 3.0
-    min_points_per_line: int = 6
-    highpass_hz: float = 0.0
+    min_points_per_line: int = 3
+    highpass_hz: float = 8.0
+    max_gap_fill_lines: int = 8
+    compensate_window: bool = True
+    time_sync_iterations: int = 4
     method: str | None = None
     integration_options: dict = field(default_factory=dict)
-    iterations: int = 2
+    iterations: int = 1
     anchor_star_tracker: bool = True
     correct_images: bool = True
     correction_column_step: int = 16
@@ -92,6 +95,9 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.n_sigma = sec.number("n_sigma", s.n_sigma, gt=0)
     s.min_points_per_line = sec.integer("min_points_per_line", s.min_points_per_line, ge=2)
     s.highpass_hz = sec.number("highpass_hz", s.highpass_hz, ge=0)
+    s.max_gap_fill_lines = sec.integer("max_gap_fill_lines", s.max_gap_fill_lines, ge=0)
+    s.compensate_window = sec.boolean("compensate_window", s.compensate_window)
+    s.time_sync_iterations = sec.integer("time_sync_iterations", s.time_sync_iterations, ge=1, le=20)
     m = sec.raw("method", None)
     if m is not None:
         from .integration import METHODS
@@ -129,6 +135,8 @@ class PairData:
     sens: np.ndarray | None = None
     inlier: np.ndarray | None = None
     synthesis: object = None
+    std_line: np.ndarray | None = None
+    std_col: np.ndarray | None = None
 
 
 @dataclass
@@ -239,6 +247,65 @@ def _grid_points_fallback(image, *, method, per_line, window, margin, line_mask)
     return L.ravel(), C.ravel()
 
 
+def _line_lag(pair: PairData, n_lines: int, max_gap: int) -> np.ndarray:
+    """Per-line extra delay of the pair [lines]: mean line residual of its inliers.
+
+    Band B sees a point of line l of A at t + τ + Δl·Te where Δl is the
+    measured line residual (pitch jitter changes the actual delay): the
+    differential of that line is δ(t + τ + Δl Te) − δ(t), not δ(t + τ) − δ(t).
+    """
+    inl = pair.inlier if pair.inlier is not None else pair.valid
+    li = np.rint(pair.line_a[inl]).astype(np.int64)
+    dl = (pair.meas_line_b - pair.pred_line_b)[inl]
+    ok = np.isfinite(dl)
+    n = np.bincount(li[ok], minlength=n_lines)
+    sm = np.bincount(li[ok], dl[ok], minlength=n_lines)
+    lag = np.where(n > 0, sm / np.maximum(n, 1), np.nan)
+    lag = fill_short_gaps(lag, max_gap=max(max_gap, 64))
+    return np.nan_to_num(lag)
+
+
+def _shifted(x: np.ndarray, t_idx: np.ndarray) -> np.ndarray:
+    """Cubic interpolation of a line-sampled signal at fractional line indices (0 outside / at NaN)."""
+    from scipy.interpolate import CubicSpline
+
+    x = np.nan_to_num(np.asarray(x, dtype=np.float64))
+    cs = CubicSpline(np.arange(x.size), x)
+    out = cs(np.clip(t_idx, 0, x.size - 1))
+    return out
+
+
+def _integrate_time_sync(diffs, taus, lags, te, *, method, settings) -> np.ndarray:
+    """Integrate differentials whose actual lag varies line by line (time synchronisation).
+
+    Fixed point: with the current estimate θ̂, each measured differential
+    D_j(t) ≈ θ(t + τ_j + λ_j(t)) − θ(t) is brought back to the constant lag τ_j
+    by subtracting θ̂(t + τ_j + λ_j(t)) − θ̂(t + τ_j), then integrated again.
+    The correction is first order in λ_j·θ̂', so a few iterations converge.
+    """
+    from .integration import integrate
+
+    n = len(diffs[0])
+    idx = np.arange(n, dtype=np.float64)
+    est = np.zeros(n)
+    n_iter = max(1, settings.time_sync_iterations)
+    for k in range(n_iter):
+        corrected = []
+        for d, tau, lag in zip(diffs, taus, lags):
+            if k > 0:
+                base = idx + tau / te
+                d = d - (_shifted(est, base + lag / te) - _shifted(est, base))
+            if settings.highpass_hz > 0:
+                d = highpass_nan(d, dt=te, cutoff_hz=settings.highpass_hz)
+            corrected.append(d)
+        inc = np.asarray(integrate(corrected, taus, te, method=method, **settings.integration_options), dtype=np.float64)
+        if settings.highpass_hz > 0:
+            # the AOCS knows the low frequencies: keep only what the images add
+            inc = highpass_nan(inc, dt=te, cutoff_hz=settings.highpass_hz)
+        est = inc
+    return est
+
+
 # --------------------------------------------------------------------------- main
 def match_pair(product: Product, ahead: str, behind: str, settings: RestorationSettings, sm=None) -> PairData:
     """Select points in band ``ahead``, predict them in ``behind``, match them."""
@@ -279,7 +346,8 @@ def match_pair(product: Product, ahead: str, behind: str, settings: RestorationS
                      method=settings.match_method, min_quality=settings.min_quality)
     return PairData(name=name, ahead=ahead, behind=behind, tau_s=tau, line_a=lines_a, col_a=cols_a,
                     meas_line_b=m.line_b, meas_col_b=m.col_b, quality=m.quality, valid=np.asarray(m.valid, bool),
-                    pred_line_b=pl, pred_col_b=pc)
+                    pred_line_b=pl, pred_col_b=pc, std_line=np.asarray(m.std_line, float),
+                    std_col=np.asarray(m.std_col, float))
 
 
 def _synthesise(product: Product, pair: PairData, sm, settings: RestorationSettings, n_lines: int, *,
@@ -296,7 +364,12 @@ def _synthesise(product: Product, pair: PairData, sm, settings: RestorationSetti
     pair.pred_line_b, pair.pred_col_b = pred_l, pred_c
     rl = pair.meas_line_b[v] - pl
     rc = pair.meas_col_b[v] - pc
-    w = np.clip(pair.quality[v], 0.05, 1.0) ** 2
+    if pair.std_line is not None:
+        # inverse variance of each matched coordinate (matcher's estimate, floored)
+        floor = 0.02
+        w = np.stack([1.0 / (pair.std_line[v] ** 2 + floor ** 2), 1.0 / (pair.std_col[v] ** 2 + floor ** 2)], axis=1)
+    else:
+        w = np.clip(pair.quality[v], 0.05, 1.0) ** 2
     res = instant_synthesis(np.rint(la).astype(np.int64), rl, rc, pair.sens, n_lines=n_lines, weights=w,
                             axes=settings.axes, min_points=settings.min_points_per_line, n_sigma=settings.n_sigma)
     inl = np.zeros(pair.valid.shape, dtype=bool)
@@ -357,13 +430,15 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
                 sm_it = product.sensor_model(attitude=clamped_attitude(_series(t_line, cur)))
             diffs = {a: [] for a in AXES}
             taus = []
+            lags = []
             for p in pairs:
                 res = _synthesise(product, p, sm_it, settings, n_lines, recompute_sens=(it == 0))
                 taus.append(p.tau_s)
+                lags.append(_line_lag(p, n_lines, settings.max_gap_fill_lines) * te)
                 for k, a in enumerate(AXES):
-                    d = res.diff[:, k]
-                    if settings.highpass_hz > 0:
-                        d = highpass_nan(d, dt=te, cutoff_hz=settings.highpass_hz)
+                    d = fill_short_gaps(res.diff[:, k], max_gap=settings.max_gap_fill_lines)
+                    if settings.compensate_window:
+                        d = window_compensation(d, window_lines=settings.window[0])
                     diffs[a].append(d)
             t_syn += _time.perf_counter() - ts
             ti = _time.perf_counter()
@@ -371,8 +446,7 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
                 if all(np.all(~np.isfinite(d)) for d in diffs[a]):
                     raise RestorationError(f"{product.path}: no line could be synthesised on {a} "
                                            "(too few good matches per line)")
-                inc = integrate(diffs[a], taus, te, method=method, **settings.integration_options)
-                inc = np.asarray(inc, dtype=np.float64)
+                inc = _integrate_time_sync(diffs[a], taus, lags, te, method=method, settings=settings)
                 valid_est[a] = np.isfinite(inc)
                 estimate[a] = np.where(np.isfinite(inc), np.nan_to_num(estimate[a]) + inc, np.nan)
             t_int += _time.perf_counter() - ti

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SynthesisResult", "instant_synthesis", "highpass_nan"]
+__all__ = ["SynthesisResult", "instant_synthesis", "highpass_nan", "fill_short_gaps", "window_compensation"]
 
 AXES = ("roll", "pitch", "yaw")
 
@@ -51,13 +51,18 @@ class SynthesisResult:
 
 
 def _accumulate(lines, rows_l, rows_c, res_l, res_c, w, n_lines, k):
-    """Per-line normal matrices (n_lines, k, k) and right-hand sides (n_lines, k)."""
+    """Per-line normal matrices (n_lines, k, k) and right-hand sides (n_lines, k).
+
+    ``w`` is (n, 2): weights of the line and column equations of each point.
+    """
     nm = np.zeros((n_lines, k, k))
     rhs = np.zeros((n_lines, k))
+    wl, wc = w[:, 0], w[:, 1]
     for a in range(k):
-        rhs[:, a] = (np.bincount(lines, w * (rows_l[:, a] * res_l + rows_c[:, a] * res_c), minlength=n_lines))
+        rhs[:, a] = np.bincount(lines, wl * rows_l[:, a] * res_l + wc * rows_c[:, a] * res_c, minlength=n_lines)
         for b in range(a, k):
-            v = np.bincount(lines, w * (rows_l[:, a] * rows_l[:, b] + rows_c[:, a] * rows_c[:, b]), minlength=n_lines)
+            v = np.bincount(lines, wl * rows_l[:, a] * rows_l[:, b] + wc * rows_c[:, a] * rows_c[:, b],
+                            minlength=n_lines)
             nm[:, a, b] = v
             nm[:, b, a] = v
     return nm, rhs
@@ -78,8 +83,9 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
         ∂(line, column)/∂(roll, pitch, yaw) at each point in band B [px/rad].
     n_lines : int
         Number of lines (length of the output).
-    weights : array (n,), optional
-        Match-quality weights (default 1).
+    weights : array (n,) or (n, 2), optional
+        Match-quality weights (default 1); with shape (n, 2), separate weights
+        of the line and column equations (e.g. 1/σ² of each matched coordinate).
     axes : sequence of str
         Axes to fit (subset of roll, pitch, yaw); the others are reported as NaN.
     min_points : int
@@ -108,8 +114,14 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
         raise ValueError(f"axes: unknown axis {unknown[0]!r}; allowed: roll, pitch, yaw")
     idx = [AXES.index(a) for a in axes]
     k = len(idx)
-    w = np.ones(n) if weights is None else np.asarray(weights, dtype=np.float64).copy()
-    ok = np.isfinite(rl) & np.isfinite(rc) & np.isfinite(w) & (w > 0) & np.all(np.isfinite(s), axis=(1, 2))
+    w = np.ones((n, 2)) if weights is None else np.asarray(weights, dtype=np.float64).copy()
+    if w.ndim == 1:
+        w = np.repeat(w[:, None], 2, axis=1)
+    if w.shape != (n, 2):
+        raise ValueError(f"weights: expected shape ({n},) or ({n}, 2), got {w.shape}")
+    w = w / np.nanmedian(np.where(w > 0, w, np.nan)) if np.any(w > 0) else w
+    ok = np.isfinite(rl) & np.isfinite(rc) & np.all(np.isfinite(w) & (w > 0), axis=1) & \
+        np.all(np.isfinite(s), axis=(1, 2))
     ok &= (lines >= 0) & (lines < n_lines)
     rows_l = s[:, 0, idx]
     rows_c = s[:, 1, idx]
@@ -125,7 +137,7 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
     rms = np.nan
     for it in range(max_iter + 1):
         li = np.where(inl, lines, 0)
-        wi = np.where(inl, w, 0.0)
+        wi = np.where(inl[:, None], w, 0.0)
         rli = np.where(inl, rl, 0.0)
         rci = np.where(inl, rc, 0.0)
         nm, rhs = _accumulate(li, rows_l, rows_c, rli, rci, wi, n_lines, k)
@@ -152,12 +164,15 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
         use = inl & has
         if use.sum() < 3:
             break
-        sig_l = max(1.4826 * np.median(np.abs(el[use] - np.median(el[use]))), sigma_floor_px)
-        sig_c = max(1.4826 * np.median(np.abs(ec[use] - np.median(ec[use]))), sigma_floor_px)
+        # standardised residuals (weights are relative inverse variances)
+        zl = el * np.sqrt(w[:, 0])
+        zc = ec * np.sqrt(w[:, 1])
+        sig_l = max(1.4826 * np.median(np.abs(zl[use] - np.median(zl[use]))), sigma_floor_px)
+        sig_c = max(1.4826 * np.median(np.abs(zc[use] - np.median(zc[use]))), sigma_floor_px)
         rms = float(np.sqrt(np.mean(np.concatenate([el[use], ec[use]]) ** 2)))
         if it == max_iter:
             break
-        new = ok & has & (np.abs(el) <= n_sigma * sig_l) & (np.abs(ec) <= n_sigma * sig_c)
+        new = ok & has & (np.abs(zl) <= n_sigma * sig_l) & (np.abs(zc) <= n_sigma * sig_c)
         new |= ok & ~has & inl  # keep points of lines not (yet) estimable
         if np.array_equal(new, inl):
             break
@@ -166,7 +181,7 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
     good = np.all(np.isfinite(x), axis=1)
     if good.any():
         nm, _ = _accumulate(np.where(inl, lines, 0), rows_l, rows_c, np.zeros(n), np.zeros(n),
-                            np.where(inl, w, 0.0), n_lines, k)
+                            np.where(inl[:, None], w, 0.0), n_lines, k)
         s2 = 0.5 * (sig_l ** 2 + sig_c ** 2)
         inv = np.linalg.inv(nm[good])
         cov_diag[good] = np.sqrt(np.maximum(np.einsum("nii->ni", inv), 0) * s2)
@@ -199,4 +214,51 @@ def highpass_nan(signal: np.ndarray, *, dt: float, cutoff_hz: float) -> np.ndarr
     low = num / np.maximum(den, 1e-12)
     out = x - low
     out[~m] = np.nan
+    return out
+
+
+def fill_short_gaps(signal: np.ndarray, *, max_gap: int) -> np.ndarray:
+    """Fill runs of at most ``max_gap`` NaN samples by cubic interpolation of their neighbours.
+
+    Longer runs, and runs touching the ends (which would need extrapolation),
+    stay NaN.
+    """
+    from scipy.interpolate import CubicSpline
+
+    x = np.asarray(signal, dtype=np.float64).copy()
+    m = np.isfinite(x)
+    if max_gap <= 0 or m.all() or m.sum() < 4:
+        return x
+    idx = np.arange(x.size)
+    nan = ~m
+    # run lengths of NaN samples
+    edges = np.diff(np.r_[0, nan.astype(np.int8), 0])
+    starts = np.flatnonzero(edges == 1)
+    ends = np.flatnonzero(edges == -1)  # exclusive
+    fill = np.zeros(x.size, dtype=bool)
+    for a, b in zip(starts, ends):
+        if b - a <= max_gap and a > 0 and b < x.size:
+            fill[a:b] = True
+    if fill.any():
+        cs = CubicSpline(idx[m], x[m])
+        x[fill] = cs(idx[fill])
+    return x
+
+
+def window_compensation(signal: np.ndarray, *, window_lines: int) -> np.ndarray:
+    """Undo, to fourth order in ωTe, the moving average of a ``window_lines``-line matching window.
+
+    A window of ``n`` lines measures the mean of the differential over those
+    lines: a moving average with gain ``M(ω) = sin(nωTe/2) / (n sin(ωTe/2)) ≈ 1 − (n²−1)(ωTe)²/24``.
+    The 3-tap filter ``[−a, 1+2a, −a]`` with ``a = (n²−1)/24`` has gain
+    ``≈ 1 + (n²−1)(ωTe)²/24``, so their product is 1 up to O((ωTe)⁴)
+    (PHR, 3 lines, 155 Hz: 0.950 → 0.997). NaNs propagate to their neighbours.
+    """
+    n = int(window_lines)
+    if n <= 1:
+        return np.asarray(signal, dtype=np.float64).copy()
+    a = (n * n - 1) / 24.0
+    x = np.asarray(signal, dtype=np.float64)
+    out = np.full_like(x, np.nan)
+    out[1:-1] = (1 + 2 * a) * x[1:-1] - a * (x[:-2] + x[2:])
     return out

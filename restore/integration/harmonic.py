@@ -21,7 +21,7 @@ from scipy.interpolate import BSpline
 
 from ._common import check_positive, prepare
 from .gaps import estimable_mask
-from .spectrum import estimate_spectrum, find_lines
+from .spectrum import find_lines, spectrum_for_lines
 
 __all__ = ["integrate_harmonic", "HarmonicModel"]
 
@@ -93,7 +93,7 @@ class HarmonicModel:
         return out
 
 
-def integrate_harmonic(diffs, taus, dt, *, frequencies_hz=None, knot_spacing_s: float = 0.1,
+def integrate_harmonic(diffs, taus, dt, *, frequencies_hz=None, knot_spacing_s: float = 0.2,
                        noise_std=None, max_lines: int = 24, merge_hz: float = 1.0,
                        ridge: float = 1e-8, residual: str | None = None,
                        max_gap_s: float | None = None, spectrum_options: dict | None = None
@@ -131,7 +131,8 @@ def integrate_harmonic(diffs, taus, dt, *, frequencies_hz=None, knot_spacing_s: 
     """
     D, valid, taus, dt = prepare(diffs, taus, dt)
     p, n = D.shape
-    spec = estimate_spectrum(D, taus, dt, noise_std=noise_std, **(spectrum_options or {}))
+    spec = spectrum_for_lines(D, taus, dt, noise_std=noise_std,
+                              spectrum_options=spectrum_options)
     if frequencies_hz is None:
         lines = find_lines(spec, max_lines=max_lines)
         if len(lines) == 0:

@@ -13,8 +13,10 @@ them segment by segment on the way back, so memory is ``O(checkpoint n²)``.
 
 Integration (:func:`integrate_kalman`) uses a state made of
 
-* one damped oscillator per spectral line (frequency, bandwidth and variance
-  from the differentials' spectrum, :func:`~.spectrum.find_lines`);
+* one resonator per spectral line — a cascade of ``order`` damped oscillators,
+  so the line's prior PSD falls fast away from it and does not leak into the
+  blind or low frequencies — with frequency, bandwidth and variance from the
+  differentials' spectrum (:func:`~.spectrum.find_lines`);
 * a delay line of the last ``L`` samples of ``theta``, so that every
   differential ``theta(t + tau_j) - theta(t)`` is a *linear* observation of the
   state (the fractional part of ``tau_j / dt`` by 4-point Lagrange
@@ -31,7 +33,7 @@ from scipy.sparse import csr_matrix
 
 from ._common import check_positive, lagrange4, prepare
 from .gaps import estimable_mask
-from .spectrum import estimate_spectrum, find_lines
+from .spectrum import find_lines, spectrum_for_lines
 
 __all__ = ["KalmanSmoother", "kalman_smooth", "integrate_kalman", "oscillator_model"]
 
@@ -191,30 +193,52 @@ def kalman_smooth(z, *, F, H, Q, R, x0, P0, checkpoint: int = 256):
     return KalmanSmoother(F, H, Q, R, x0, P0).smooth(z, checkpoint=checkpoint)
 
 
-def oscillator_model(freqs_hz, widths_hz, variances, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """Discrete damped oscillators (2 states each): transition ``F`` and noise ``Q``.
+def oscillator_model(freqs_hz, widths_hz, variances, dt: float, *, order: int = 2
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Discrete resonators, one per line: transition ``F``, noise ``Q``, output row ``h``.
 
-    Oscillator ``i`` rotates by ``2 pi f_i dt`` and decays by
+    A resonator stage rotates a 2-vector by ``2 pi f_i dt`` and damps it by
     ``rho_i = exp(-pi B_i dt)`` per step (``B_i``: full width at half maximum of
-    its Lorentzian line, Hz); ``Q`` keeps its stationary variance at
-    ``variances[i]`` per component.
+    a single stage's Lorentzian, Hz).  ``order`` stages in cascade (each driven
+    by the previous one, the first by white noise) give a line whose PSD falls
+    as ``1 / df**(2 order)`` away from ``f_i``: ``order >= 2`` keeps the prior
+    from leaking into blind and low frequencies.  ``Q`` is scaled so that the
+    output ``h x`` of line ``i`` has stationary variance ``variances[i]``.
     """
     f = np.atleast_1d(np.asarray(freqs_hz, dtype=np.float64))
     b = np.broadcast_to(np.asarray(widths_hz, dtype=np.float64), f.shape)
     v = np.broadcast_to(np.asarray(variances, dtype=np.float64), f.shape)
-    n = 2 * f.size
+    order = int(order)
+    if order < 1:
+        raise ValueError(f"order: must be >= 1, got {order}")
+    m = 2 * order
+    n = m * f.size
     F = np.zeros((n, n))
     Q = np.zeros((n, n))
+    h = np.zeros(n)
     for i, (fi, bi, vi) in enumerate(zip(f, b, v)):
         rho = math.exp(-math.pi * bi * dt)
         c, s = math.cos(2 * math.pi * fi * dt), math.sin(2 * math.pi * fi * dt)
-        F[2 * i:2 * i + 2, 2 * i:2 * i + 2] = rho * np.array([[c, -s], [s, c]])
-        Q[2 * i:2 * i + 2, 2 * i:2 * i + 2] = vi * (1 - rho**2) * np.eye(2)
-    return F, Q
+        rot = rho * np.array([[c, -s], [s, c]])
+        Fi = np.zeros((m, m))
+        Fi[:2, :2] = rot
+        for st in range(1, order):   # stage st: rot * own state + (1 - rho) * previous stage
+            Fi[2 * st:2 * st + 2, 2 * st:2 * st + 2] = rot
+            Fi[2 * st:2 * st + 2, 2 * st - 2:2 * st] = (1 - rho) * np.eye(2)
+        Qi = np.zeros((m, m))
+        Qi[:2, :2] = np.eye(2)
+        Pi = solve_discrete_lyapunov(Fi, Qi)
+        scale = vi / max(Pi[m - 2, m - 2], 1e-300)
+        sl = slice(m * i, m * (i + 1))
+        F[sl, sl] = Fi
+        Q[sl, sl] = Qi * scale
+        h[m * i + m - 2] = 1.0
+    return F, Q, h
 
 
 def integrate_kalman(diffs, taus, dt, *, frequencies_hz=None, noise_std=None,
                      min_width_hz: float = 0.3, width_factor: float = 2.0, max_lines: int = 16,
+                     order: int = 2,
                      white_fraction: float = 1e-4, checkpoint: int = 256,
                      max_gap_s: float | None = None, spectrum_options: dict | None = None
                      ) -> np.ndarray:
@@ -232,6 +256,8 @@ def integrate_kalman(diffs, taus, dt, *, frequencies_hz=None, noise_std=None,
         Oscillator bandwidth = max(min_width_hz, width_factor * line width) (Hz).
     max_lines : int, keyword-only
         At most this many oscillators.
+    order : int, keyword-only
+        Resonator stages per line (see :func:`oscillator_model`).
     white_fraction : float, keyword-only
         Variance of a white component of theta, relative to the lines' total.
     checkpoint : int, keyword-only
@@ -248,7 +274,8 @@ def integrate_kalman(diffs, taus, dt, *, frequencies_hz=None, noise_std=None,
     """
     D, valid, taus, dt = prepare(diffs, taus, dt)
     p, n = D.shape
-    spec = estimate_spectrum(D, taus, dt, noise_std=noise_std, **(spectrum_options or {}))
+    spec = spectrum_for_lines(D, taus, dt, noise_std=noise_std,
+                              spectrum_options=spectrum_options)
     lines = find_lines(spec, max_lines=max_lines)
     if frequencies_hz is not None:
         freqs = np.atleast_1d(np.asarray(frequencies_hz, dtype=np.float64))
@@ -261,14 +288,12 @@ def integrate_kalman(diffs, taus, dt, *, frequencies_hz=None, noise_std=None,
         widths = np.maximum(float(min_width_hz), float(width_factor) * lines.width)
     else:
         return np.full(n, np.nan)
-    Fo, Qo = oscillator_model(freqs, widths, var, dt)
-    k = freqs.size
+    Fo, Qo, h = oscillator_model(freqs, widths, var, dt, order=order)
+    k = Fo.shape[0] // 2
     lags = taus / dt
     shifts = np.ceil(lags).astype(int) + 2
     L = int(shifts.max()) + 2
     ns = 2 * k + L
-    h = np.zeros(2 * k)
-    h[0::2] = 1.0                       # theta = sum of the oscillators' first components
     F = np.zeros((ns, ns))
     F[:2 * k, :2 * k] = Fo
     F[2 * k, :2 * k] = h @ Fo           # new theta from the propagated oscillators

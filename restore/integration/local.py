@@ -25,10 +25,11 @@ pair, the samples where ``theta(t_n)`` itself enters the differentials
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import solve
 
 from ._common import check_positive, per_pair, prepare
 from .gaps import estimable_mask, fill_from_differentials, interpolate_gaps
-from .spectrum import estimate_spectrum, find_lines
+from .spectrum import find_lines, spectrum_for_lines
 
 __all__ = ["LocalIntegrator", "integrate_local", "default_offsets"]
 
@@ -113,8 +114,8 @@ class LocalIntegrator:
     """
 
     def __init__(self, taus, dt, frequencies_hz, amplitudes, noise_std, *, offsets=None,
-                 half_window: int = 8, frequency_spread=None, amplitude_noise: float = 0.1,
-                 n_train: int = 40000, seed: int = 0, ridge: float = 1e-9):
+                 half_window: int = 32, frequency_spread=None, amplitude_noise: float = 0.1,
+                 n_train: int = 30000, seed: int = 0, ridge: float = 1e-9):
         self.taus = np.atleast_1d(np.asarray(taus, dtype=np.float64))
         self.dt = check_positive("dt", dt)
         p = self.taus.size
@@ -151,6 +152,9 @@ class LocalIntegrator:
         self.R += ridge * np.trace(self.R) / self.R.shape[0] * np.eye(self.R.shape[0])
         self.weights = np.linalg.solve(self.R, self.r)
         self.error_var = self.var - float(self.r @ self.weights)
+        ev = np.linalg.eigvalsh(self.R)
+        # dropping taps through the full inverse is fast but needs a well-conditioned R
+        self._rinv = np.linalg.inv(self.R) if ev[-1] < 1e10 * max(ev[0], 1e-300) else None
         self._cache: dict = {}
 
     @property
@@ -164,13 +168,21 @@ class LocalIntegrator:
             if not keep.any():
                 self._cache[key] = (np.zeros(0), self.var)
             else:
-                R = self.R[np.ix_(keep, keep)]
                 r = self.r[keep]
-                w = np.linalg.solve(R, r)
+                miss = ~keep
+                if self._rinv is not None and miss.sum() <= 0.25 * keep.sum():
+                    # few taps dropped: Schur complement of the full inverse,
+                    # (R_kk)^-1 = Ri_kk - Ri_km (Ri_mm)^-1 Ri_mk
+                    ri_kk = self._rinv[np.ix_(keep, keep)]
+                    ri_km = self._rinv[np.ix_(keep, miss)]
+                    ri_mm = self._rinv[np.ix_(miss, miss)]
+                    w = ri_kk @ r - ri_km @ solve(ri_mm, ri_km.T @ r, assume_a="pos")
+                else:
+                    w = solve(self.R[np.ix_(keep, keep)], r, assume_a="pos")
                 self._cache[key] = (w, self.var - float(r @ w))
         return self._cache[key]
 
-    def apply(self, diffs, *, max_error: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    def apply(self, diffs, *, max_error: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
         """Estimate theta at every sample.
 
         Parameters
@@ -179,7 +191,8 @@ class LocalIntegrator:
             Differentials (rad), NaN at gaps.
         max_error : float, keyword-only
             Samples whose predicted error standard deviation exceeds this
-            fraction of the signal's are set to NaN.
+            fraction of the signal's (and twice that of a complete window)
+            are set to NaN.
 
         Returns
         -------
@@ -213,15 +226,15 @@ class LocalIntegrator:
                 err[sel] = np.sqrt(max(e, 0.0))
                 if w.size:
                     theta[sel] = X[np.ix_(sel, np.flatnonzero(pat))] @ w
-        limit = float(max_error) * np.sqrt(self.var)
+        limit = max(float(max_error) * np.sqrt(self.var), 2.0 * np.sqrt(max(self.error_var, 0.0)))
         theta[err > limit] = np.nan
         return theta, err
 
 
 def integrate_local(diffs, taus, dt, *, frequencies_hz=None, amplitudes=None, noise_std=None,
-                    half_window: int = 8, offsets=None, frequency_spread=None,
-                    amplitude_noise: float = 0.1, n_train: int = 40000, seed: int = 0,
-                    max_lines: int = 24, max_error: float = 0.3, max_gap_s: float | None = None,
+                    half_window: int = 32, offsets=None, frequency_spread=None,
+                    amplitude_noise: float = 0.1, n_train: int = 30000, seed: int = 0,
+                    max_lines: int = 24, max_error: float = 0.05, max_gap_s: float | None = None,
                     spectrum_options: dict | None = None) -> np.ndarray:
     """CNES local integration (see module docstring).
 
@@ -254,7 +267,8 @@ def integrate_local(diffs, taus, dt, *, frequencies_hz=None, amplitudes=None, no
         theta at ``n dt`` (rad), mean removed, NaN where not estimated.
     """
     D, valid, taus, dt = prepare(diffs, taus, dt)
-    spec = estimate_spectrum(D, taus, dt, noise_std=noise_std, **(spectrum_options or {}))
+    spec = spectrum_for_lines(D, taus, dt, noise_std=noise_std,
+                              spectrum_options=spectrum_options)
     if frequencies_hz is None:
         lines = find_lines(spec, max_lines=max_lines)
         if len(lines) == 0:

@@ -159,10 +159,12 @@ class WienerResult:
         self.residual = residual
 
 
-def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter):
+def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=None):
     """Solve the MAP normal equations on the periodic grid of length ``m``.
 
-    Returns (theta on the record, predicted differentials, iterations, residual).
+    ``theta0`` (length ``m``, optional) warm-starts the iteration.
+    Returns (theta on the record, theta on the grid, predicted differentials,
+    iterations, residual).
     """
     p, n = D.shape
     c = np.sqrt(S / dt)
@@ -182,8 +184,12 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter):
         return irfft(rfft(r) / diag, n=m)
 
     # plain sums rather than BLAS dots: cheap at this size, and immune to BLAS threading
-    z = np.zeros(m)
-    r = b.copy()
+    if theta0 is None:
+        z = np.zeros(m)
+        r = b.copy()
+    else:  # z0 = L^-1 theta0 on the prior's support
+        z = irfft(np.where(c > 0, rfft(theta0) / np.where(c > 0, c, 1.0), 0.0), n=m)
+        r = b - normal(z)
     bn = math.sqrt(float(np.sum(b * b))) or 1.0
     y = precond(r)
     d = y.copy()
@@ -202,13 +208,13 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter):
         d = y + (ry_new / ry) * d
         ry = ry_new
     zf = rfft(z)
-    full = irfft(c * zf, n=m)[:n]
+    grid = irfft(c * zf, n=m)
     pred = irfft(kop * zf[None, :], n=m, axis=-1)[:, :n]
-    return full, pred, it, res
+    return grid[:n], grid, pred, it, res
 
 
 def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction: float = 0.5,
-                     tol: float = 1e-7, maxiter: int = 400, refine: int | None = None,
+                     tol: float = 1e-7, maxiter: int = 300, refine: int | None = None,
                      max_gap_s: float | None = None, spectrum_options: dict | None = None,
                      return_details: bool = False):
     """Exact multi-pair Wiener (MAP) integration on the finite record, by conjugate gradients.
@@ -259,13 +265,14 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
     opts = dict(spectrum_options or {})
     spec: SpectralEstimate = estimate_spectrum(D, taus, dt, n_fft=m, noise_std=noise_std, **opts)
     passes = 0 if psd is not None else int(refine)
+    grid = None
     for k in range(passes + 1):
         S = spec.psd.copy() if psd is None else _psd_on_grid(psd, spec.freq)
         S[0] = 0.0
         if m % 2 == 0:
             S[-1] = 0.0  # keep the operator exactly self-adjoint on real signals
-        full, pred, it, res = _cg_solve(D, valid, taus, dt, spec.freq, S, spec.noise_std,
-                                        m, tol=tol, maxiter=maxiter)
+        full, grid, pred, it, res = _cg_solve(D, valid, taus, dt, spec.freq, S, spec.noise_std,
+                                              m, tol=tol, maxiter=maxiter, theta0=grid)
         if k == passes:
             break
         sigma = noise_std

@@ -109,46 +109,6 @@ class Coords:
         dqy = int(round(dy_m * QUANTA_PER_M))
         return Coords(self.qx + dqx, self.qy + dqy, self.grid)
 
-    def subset(self, mask: np.ndarray) -> "Coords":
-        """Points context for the texels where ``mask`` is true (mask has ``shape``)."""
-        qx = np.broadcast_to(self.qx, self.shape)[mask]
-        qy = np.broadcast_to(self.qy, self.shape)[mask]
-        return Coords(qx, qy, False)
-
-
-def table_lookup(fn: Callable, i: np.ndarray, j: np.ndarray | None = None, *,
-                 max_ratio: float = 4.0) -> np.ndarray:
-    """``fn(i, j)`` (or ``fn(i)``) for integer index arrays, via a bounding-box table when compact.
-
-    ``fn`` must be elementwise (a value depends only on its (i, j) pair), so both
-    ways give bit-identical results; the table is just faster when many texels
-    share few indices.
-    """
-    i = np.asarray(i)
-    n = i.size if j is None else int(np.prod(np.broadcast_shapes(i.shape, np.shape(j))))
-    if n == 0:
-        return fn(i) if j is None else fn(i, np.asarray(j))
-    i0, i1 = int(i.min()), int(i.max())
-    if j is None:
-        if (i1 - i0 + 1) > max_ratio * n + 4096:
-            return fn(i)
-        table = fn(np.arange(i0, i1 + 1, dtype=np.int64))
-        return table[i - i0] if i0 else table[i]
-    j = np.asarray(j)
-    j0, j1 = int(j.min()), int(j.max())
-    w = i1 - i0 + 1
-    size = w * (j1 - j0 + 1)
-    if size > max_ratio * n + 4096:
-        ib, jb = np.broadcast_arrays(i, j)
-        return fn(ib, jb)
-    table = fn(np.arange(i0, i1 + 1, dtype=np.int64)[None, :],
-               np.arange(j0, j1 + 1, dtype=np.int64)[:, None])
-    table = np.ascontiguousarray(np.broadcast_to(table, (j1 - j0 + 1, w))).ravel()
-    if j1 == j0:
-        return table[i - i0]
-    idx = j * w + i
-    idx -= j0 * w + i0
-    return table[idx]
 
 
 class Lookup:
@@ -201,13 +161,16 @@ class Lookup:
         """Values of output ``k`` at an index."""
         if self.tabulated:
             return self.tables[k][idx]
-        for f in self.fns:
-            r = f(*idx)
-            r = r if isinstance(r, tuple) else (r,)
-            if k < len(r):
-                return r[k]
-            k -= len(r)
-        raise IndexError("Lookup output out of range")
+        # direct evaluation, memoised per index (the arrays are kept, so ids stay unique)
+        key = (id(idx[0]), id(idx[1]))
+        memo = self.__dict__.setdefault("_memo", {})
+        if key not in memo:
+            outs = []
+            for f in self.fns:
+                r = f(*idx)
+                outs.extend(r if isinstance(r, tuple) else (r,))
+            memo[key] = (idx, outs)
+        return memo[key][1][k]
 
 
 def lattice_interp(c: Coords, cell_m: float, lattice_fn: Callable, *, smooth: bool = True,
@@ -322,7 +285,7 @@ class CachedLattice:
     ``max_blocks`` blocks (least recently used are dropped).
     """
 
-    def __init__(self, fn: Callable, *, block: int = 64, max_blocks: int = 256):
+    def __init__(self, fn: Callable, *, block: int = 64, max_blocks: int = 512):
         import threading
         from collections import OrderedDict
         self.fn = fn
@@ -330,6 +293,12 @@ class CachedLattice:
         self.max_blocks = int(max_blocks)
         self._cache: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
         self._lock = threading.Lock()
+
+    def __getstate__(self):
+        return {"fn": self.fn, "block": self.block, "max_blocks": self.max_blocks}
+
+    def __setstate__(self, state):
+        self.__init__(state["fn"], block=state["block"], max_blocks=state["max_blocks"])
 
     def _get(self, bx: int, by: int) -> np.ndarray:
         key = (bx, by)
@@ -358,7 +327,7 @@ class CachedLattice:
         bx0, bx1 = int(ix.min()) // b, int(ix.max()) // b
         by0, by1 = int(iy.min()) // b, int(iy.max()) // b
         nbx, nby = bx1 - bx0 + 1, by1 - by0 + 1
-        if nbx * nby > max(4, self.max_blocks // 4):
+        if nbx * nby > self.max_blocks:
             return self.fn(*np.broadcast_arrays(ix, iy))
         region = np.empty((nby * b, nbx * b), dtype=self._get(bx0, by0).dtype)
         for j in range(nby):

@@ -337,16 +337,19 @@ def fractal_dem(*, x_range_m, y_range_m, resolution_m: float, relief_m: float,
         return Dem(x0, y0, resolution_m, resolution_m, np.zeros((ny, nx)))
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, 11])
     # synthesise on a padded grid so the FFT periodicity does not show
-    px, py = int(nx * 1.5) + 8, int(ny * 1.5) + 8
+    px, py = int(nx * 1.25) + 8, int(ny * 1.25) + 8
     kx = np.fft.rfftfreq(px, d=resolution_m)
     ky = np.fft.fftfreq(py, d=resolution_m)
-    k = np.hypot(kx[None, :], ky[:, None])
     kmin = 1.0 / (max(px, py) * resolution_m)
-    k = np.maximum(k, kmin)
-    amp = k ** -(1.0 + roughness)
+    amp = np.hypot(kx[None, :], ky[:, None])
+    np.maximum(amp, kmin, out=amp)
+    np.power(amp, -(1.0 + roughness), out=amp)
     amp[0, 0] = 0.0
-    spec = (rng.standard_normal(k.shape) + 1j * rng.standard_normal(k.shape)) * amp
+    spec = rng.standard_normal(amp.shape) + 1j * rng.standard_normal(amp.shape)
+    spec *= amp
+    del amp
     fr = np.fft.irfft2(spec, s=(py, px))[:ny, :nx]
+    del spec
     # gentle hills: a few broad Gaussian bumps and dips, a few km across
     X = x0 + resolution_m * np.arange(nx)
     Y = y0 + resolution_m * np.arange(ny)
@@ -435,8 +438,6 @@ def load_geotiff_dem(path, *, band: int = 0, nodata: float | None = None,
             tie = tuple(tie.value) if tie is not None else None
             nd_tag = page.tags.get(42113)
             geokeys = _geokeys(page)
-    except ValueError:
-        raise
     except Exception as exc:  # tifffile raises various types for broken files
         raise ValueError(f"path: cannot read GeoTIFF {p}: {exc}") from None
     arr = np.asarray(arr)
@@ -510,7 +511,7 @@ def resample(dem: Dem, resolution_m: float) -> Dem:
 
     The new grid is centred on the old one and lies inside it. When coarsening,
     the heights are low-passed first (Gaussian, sigma = sqrt(f² − 1) / 2 samples
-    for a coarsening factor f).
+    for a coarsening factor f; odd reflection at the edges, so planes stay exact).
 
     Parameters
     ----------
@@ -529,7 +530,11 @@ def resample(dem: Dem, resolution_m: float) -> Dem:
     fx, fy = resolution_m / dem.dx_m, resolution_m / dem.dy_m
     if fx > 1 or fy > 1:
         sig = (0.5 * math.sqrt(max(fy * fy - 1, 0.0)), 0.5 * math.sqrt(max(fx * fx - 1, 0.0)))
-        z = ndimage.gaussian_filter(z, sigma=sig, mode="nearest")
+        # odd reflection at the edges (linear extrapolation) keeps planes exact
+        pad = tuple((int(math.ceil(4 * s)) + 1,) * 2 for s in sig)
+        zp = np.pad(z, pad, mode="reflect", reflect_type="odd")
+        zp = ndimage.gaussian_filter(zp, sigma=sig, mode="nearest", truncate=4.0)
+        z = zp[pad[0][0]:pad[0][0] + z.shape[0], pad[1][0]:pad[1][0] + z.shape[1]]
         src = Dem(dem.x0_m, dem.y0_m, dem.dx_m, dem.dy_m, z)
     else:
         src = dem

@@ -213,8 +213,8 @@ def texture_from_config(section: Section, *, base_dir, seed: int, sun: Sun | Non
         )
         section.finish()
         try:
-            return ProceduralTexture(seed=seed, bands=BAND_NAMES if bands is None else bands, texel_m=texel, sun_elevation_deg=sun.elevation_deg,
-                                     sun_azimuth_deg=sun.azimuth_deg, **kw)
+            return ProceduralTexture(seed=seed, bands=BAND_NAMES if bands is None else bands, texel_m=texel,
+                                     sun_elevation_deg=sun.elevation_deg, sun_azimuth_deg=sun.azimuth_deg, **kw)
         except ValueError as exc:
             raise _reraise(section, exc) from None
     path = _resolve(section, "path", base_dir)

@@ -8,7 +8,15 @@ Both classes share one interface::
 
 Texel (j, i) of ``grid`` is centred at ``(x0_m + (i + ½) texel_m, y0_m + (j + ½) texel_m)``
 (x along-track, y across-track, m), so a grid covers ``[x0, x0 + nx texel) × [y0, y0 + ny texel)``.
-Values are point samples at the texel centres (no area averaging).
+Values are point samples at the texel centres (no area averaging: features finer than a
+texel alias).
+
+:class:`ProceduralTexture` also offers ``land_cover_grid`` and ``grid_and_land_cover``
+(same grid convention). Its values depend only on the texel centre, quantised to
+1/1024 m, so a strip or tile computed alone equals the same texels of a larger block
+bit for bit (tiles must be offset by whole texels). Internally ``grid`` works in
+256 × 256 tiles spread over ``workers`` threads; coarse land-use fields live on a
+16-m node lattice (cached by blocks) and are bilinearly upsampled.
 """
 from __future__ import annotations
 
@@ -211,6 +219,11 @@ class ProceduralTexture:
                  cloud_fraction: float = 0.0, urban_fraction: float = 0.08, forest_fraction: float = 0.25,
                  field_size_m: float = 200.0, sun_elevation_deg: float = 45.0, sun_azimuth_deg: float = 135.0,
                  texel_m: float = 1.0, cloud_height_m: float = 1500.0, workers: int | None = None):
+        self._init_kwargs = dict(seed=seed, bands=bands, water_fraction=water_fraction,
+                                 cloud_fraction=cloud_fraction, urban_fraction=urban_fraction,
+                                 forest_fraction=forest_fraction, field_size_m=field_size_m,
+                                 sun_elevation_deg=sun_elevation_deg, sun_azimuth_deg=sun_azimuth_deg,
+                                 texel_m=texel_m, cloud_height_m=cloud_height_m, workers=workers)
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise ValueError(f"seed: must be an integer, got {seed!r}")
         self.seed = int(seed)
@@ -244,6 +257,13 @@ class ProceduralTexture:
         self.workers = int(workers)
         self._tile = 256
         self._setup()
+
+    def __getstate__(self):
+        # rebuilt from its parameters (the caches hold closures)
+        return self._init_kwargs
+
+    def __setstate__(self, state):
+        self.__init__(**state)
 
     def __repr__(self) -> str:
         return (f"ProceduralTexture(seed={self.seed}, bands={self.bands}, water_fraction={self.water_fraction}, "
@@ -364,20 +384,31 @@ class ProceduralTexture:
             depends only on its centre (to 1/1024 m), so tiles offset by whole
             texels reproduce a big block exactly.
         """
+        return self._tiled(x0_m, y0_m, texel_m, nx, ny, want_bands=True, want_classes=False)[0]
+
+    def grid_and_land_cover(self, x0_m: float, y0_m: float, texel_m: float, nx: int, ny: int):
+        """:meth:`grid` and :meth:`land_cover_grid` in one pass: ``(reflectance, classes)``."""
+        return self._tiled(x0_m, y0_m, texel_m, nx, ny, want_bands=True, want_classes=True)
+
+    def _tiled(self, x0_m, y0_m, texel_m, nx, ny, *, want_bands: bool, want_classes: bool):
         _check_grid_args(x0_m, y0_m, texel_m, nx, ny)
         nx, ny = int(nx), int(ny)
         qx = quantise(x0_m + (np.arange(nx) + 0.5) * texel_m)[None, :]
         qy = quantise(y0_m + (np.arange(ny) + 0.5) * texel_m)[:, None]
-        out = np.empty((len(self.bands), ny, nx), dtype=_F32)
-        # square-ish tiles keep the per-tile lookup tables (rotated layouts) small
+        out = np.empty((len(self.bands), ny, nx), dtype=_F32) if want_bands else None
+        cls_out = np.empty((ny, nx), dtype=_U8) if want_classes else None
+        # square-ish tiles keep the per-tile lookup tables (rotated layouts) small and in cache
         tw = min(nx, self._tile)
         th = min(ny, max(16, self._tile * self._tile // tw))
         chunks = [(j, min(ny, j + th), i, min(nx, i + tw)) for j in range(0, ny, th) for i in range(0, nx, tw)]
 
         def work(c):
             j0, j1, i0, i1 = c
-            _, refl = self._evaluate(Coords(qx[:, i0:i1], qy[j0:j1], True), want_bands=True)
-            out[:, j0:j1, i0:i1] = refl
+            cls, refl = self._evaluate(Coords(qx[:, i0:i1], qy[j0:j1], True), want_bands=want_bands)
+            if want_bands:
+                out[:, j0:j1, i0:i1] = refl
+            if want_classes:
+                cls_out[j0:j1, i0:i1] = cls
 
         if self.workers > 1 and len(chunks) > 1:
             with ThreadPoolExecutor(max_workers=min(self.workers, len(chunks))) as ex:
@@ -385,7 +416,7 @@ class ProceduralTexture:
         else:
             for c in chunks:
                 work(c)
-        return out
+        return out, cls_out
 
     def land_cover(self, x, y) -> np.ndarray:
         """Land-cover class (``LandCover`` codes, uint8) at ground points (m).
@@ -407,11 +438,7 @@ class ProceduralTexture:
 
     def land_cover_grid(self, x0_m: float, y0_m: float, texel_m: float, nx: int, ny: int) -> np.ndarray:
         """Land-cover classes on the texel grid of :meth:`grid`, shape (ny, nx) uint8."""
-        _check_grid_args(x0_m, y0_m, texel_m, nx, ny)
-        qx = quantise(x0_m + (np.arange(int(nx)) + 0.5) * texel_m)[None, :]
-        qy = quantise(y0_m + (np.arange(int(ny)) + 0.5) * texel_m)[:, None]
-        cls, _ = self._evaluate(Coords(qx, qy, True), want_bands=False)
-        return cls
+        return self._tiled(x0_m, y0_m, texel_m, nx, ny, want_bands=False, want_classes=True)[1]
 
     # -- the landscape ---------------------------------------------------------
     def _macro_field(self, c: Coords, name: str) -> np.ndarray:
@@ -683,10 +710,10 @@ class ProceduralTexture:
         cloud = cshadow = cloud_bright = None
         if self.cloud_fraction > 0:
             nc = self._macro_field(c, "cloud")
-            cloud = _smooth(np.clip((nc - self._t_cloud) * _F32(5.0) + _F32(0.5), _F32(0), _F32(1)))
+            cloud = _smooth(np.clip((nc - self._t_cloud) * _F32(15.0) + _F32(0.5), _F32(0), _F32(1)))
             L = self.cloud_height_m / self._tan_e
             ncs = self._macro_field(c.shifted(L * self._sun_xy[0], L * self._sun_xy[1]), "cloud")
-            cshadow = _smooth(np.clip((ncs - self._t_cloud) * _F32(5.0) + _F32(0.5), _F32(0), _F32(1)))
+            cshadow = _smooth(np.clip((ncs - self._t_cloud) * _F32(15.0) + _F32(0.5), _F32(0), _F32(1)))
             _put(cls, cloud >= _F32(0.5), LandCover.CLOUD)
             cloud_bright = _F32(0.88) + _F32(0.12) * np.clip((nc - self._t_cloud) * _F32(2.0), _F32(0), _F32(1))
 

@@ -1,0 +1,503 @@
+"""Selection of characteristic points for band-to-band matching (patent step a).
+
+Two stages, as in the CNES processing line (§3.3.1) and the Airbus patent:
+
+1. An a-priori radiometric criterion, :func:`texture_mask`, rejects the areas
+   where a match cannot be trusted: water and flat ground (no texture), clouds
+   (bright, smooth, possibly saturated), no data. It rests on the local
+   high-frequency gradient energy (Delon & Rougé 2007): the standard deviation
+   of a match of two windows with noise ``sigma`` is, per axis,
+
+   ``std_axis = sqrt(2) * sigma / sqrt(sum_window(d image / d axis) ** 2)``
+
+   (px; ``sqrt(2)``: both bands are noisy), see :func:`expected_matching_std`.
+2. One of the patent's three ways of choosing points:
+
+   - :func:`double_gradient_points`: second derivative ("doble gradiente")
+     above a threshold in at least two directions;
+   - :func:`grid_points`: a predetermined grid, independent of the content
+     (rejection on match quality comes after matching);
+   - :func:`spread_quality_subset`: a subset that maximises the spatial
+     spread and the quality (best point per column bin and line).
+
+:func:`select_points` chains them and returns ``(line, column)`` candidates in
+band A, aiming at ``per_line`` points per image line (CNES: 20 per line) where
+texture allows, none on masked areas and none closer to the borders than the
+matcher's support (window half-size + search + interpolation margin).
+
+Images are ``(line, column)`` float arrays; pixel centres at integers.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from .matching import support_margin
+
+__all__ = [
+    "estimate_noise",
+    "gradient_energy",
+    "expected_matching_std",
+    "texture_mask",
+    "double_gradient_points",
+    "grid_points",
+    "spread_quality_subset",
+    "select_points",
+]
+
+_METHODS = ("grid", "double_gradient", "spread")
+#: antisymmetric 5-point gradient (the matcher's), 1/px
+_GRADIENT = np.array([1.0, -8.0, 0.0, 8.0, -1.0]) / 12.0
+#: Immerkaer's noise mask: difference of two Laplacians, blind to planes
+_IMMERKAER = np.array([[1.0, -2.0, 1.0], [-2.0, 4.0, -2.0], [1.0, -2.0, 1.0]])
+
+
+def _as_image(image, name="image") -> np.ndarray:
+    img = np.asarray(image, dtype=float)
+    if img.ndim != 2 or min(img.shape) < 1:
+        raise ValueError(f"{name}: expected a non-empty 2-D (line, column) array, got shape {img.shape}")
+    return img
+
+
+def _check_window(window) -> tuple[int, int]:
+    try:
+        h, w = (int(v) for v in window)
+        ok = (h, w) == tuple(window) and h >= 1 and w >= 1 and h % 2 == 1 and w % 2 == 1
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"window: expected two odd positive integers (lines, columns), got {window!r}")
+    return h, w
+
+
+def _box_sum(x: np.ndarray, window: tuple[int, int]) -> np.ndarray:
+    """Sum over a centred ``window`` at every pixel (edges: reflected)."""
+    return ndimage.uniform_filter(x, size=window, mode="reflect") * (window[0] * window[1])
+
+
+def _dilate(mask: np.ndarray, window: tuple[int, int]) -> np.ndarray:
+    """True where a centred ``window`` touches a True pixel."""
+    return ndimage.maximum_filter(mask.astype(np.uint8), size=window, mode="constant", cval=0) > 0
+
+
+def estimate_noise(image) -> float:
+    """Standard deviation of the white noise of an image (robust).
+
+    Immerkaer's mask (a difference of two Laplacians, zero on planes) has a
+    gain of 6 on white noise; the median of its absolute response over the
+    image gives ``sigma = median(|L|) / (0.6745 * 6)``. Texture inflates the
+    estimate; pass the known noise to the other functions when you have it.
+
+    Parameters
+    ----------
+    image : ndarray, shape (lines, columns)
+        Image, at least 3 x 3; non-finite pixels are ignored.
+
+    Returns
+    -------
+    float
+        Noise standard deviation (image unit).
+    """
+    img = _as_image(image)
+    if min(img.shape) < 3:
+        raise ValueError(f"image: need at least 3 x 3 pixels, got {img.shape}")
+    resp = ndimage.correlate(img, _IMMERKAER, mode="nearest")[1:-1, 1:-1]
+    resp = np.abs(resp[np.isfinite(resp)])
+    if resp.size == 0:
+        return float("nan")
+    return float(np.median(resp) / (0.6745 * 6.0))
+
+
+def gradient_energy(image, *, window=(3, 31)) -> tuple[np.ndarray, np.ndarray]:
+    """Local gradient energy per axis, summed over a window.
+
+    Parameters
+    ----------
+    image : ndarray, shape (lines, columns)
+        Image.
+    window : (int, int), keyword-only
+        Window (lines, columns), odd, centred on each pixel.
+
+    Returns
+    -------
+    e_line, e_col : ndarray, shape of ``image``
+        ``sum_window (d image / d line)**2`` and the same across columns
+        (image unit**2 / px**2), with the matcher's 5-point gradient. Non-finite
+        where the window or the gradient support touches no data.
+    """
+    img = _as_image(image)
+    window = _check_window(window)
+    g_l = ndimage.correlate1d(img, _GRADIENT, axis=0, mode="reflect")
+    g_c = ndimage.correlate1d(img, _GRADIENT, axis=1, mode="reflect")
+    return _box_sum(g_l * g_l, window), _box_sum(g_c * g_c, window)
+
+
+def expected_matching_std(image, *, window=(3, 31), noise_std=None) -> tuple[np.ndarray, np.ndarray]:
+    """A-priori standard deviation of a match centred on each pixel (Delon & Rougé).
+
+    Parameters
+    ----------
+    image : ndarray, shape (lines, columns)
+        Band A.
+    window : (int, int), keyword-only
+        Matching window (lines, columns), odd.
+    noise_std : float or None, keyword-only
+        Noise standard deviation of each band (image unit); estimated by
+        :func:`estimate_noise` when None.
+
+    Returns
+    -------
+    std_line, std_col : ndarray, shape of ``image``
+        ``sqrt(2) * noise_std / sqrt(gradient energy)`` per axis (px); ``inf``
+        where the window has no gradient.
+    """
+    img = _as_image(image)
+    sigma = estimate_noise(img) if noise_std is None else float(noise_std)
+    if not sigma >= 0:
+        raise ValueError(f"noise_std: must be >= 0, got {noise_std}")
+    e_l, e_c = gradient_energy(img, window=window)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = np.sqrt(2.0) * sigma
+        return k / np.sqrt(e_l), k / np.sqrt(e_c)
+
+
+def texture_mask(image, *, window=(3, 31), noise_std=None, max_std=0.1, min_contrast=0.0,
+                 saturation=None, max_level=None) -> np.ndarray:
+    """Pixels where a window centred on them has enough texture to be matched.
+
+    Parameters
+    ----------
+    image : ndarray, shape (lines, columns)
+        Band A. Non-finite pixels are no data.
+    window : (int, int), keyword-only
+        Matching window (lines, columns), odd.
+    noise_std : float or None, keyword-only
+        Noise standard deviation (image unit); estimated when None.
+    max_std : float, keyword-only
+        Largest acceptable a-priori matching standard deviation on either axis
+        (px, :func:`expected_matching_std`). Rejects water, flat ground and the
+        smooth inside of clouds: their gradient energy is that of the noise.
+    min_contrast : float, keyword-only
+        Smallest acceptable local contrast, standard deviation over mean level
+        of the window (dimensionless; 0 disables). Rejects bright, smooth areas
+        (clouds) whose gradient energy is dominated by photon noise.
+    saturation : float or None, keyword-only
+        Level at or above which a pixel is saturated (image unit); windows
+        touching a saturated pixel are rejected. None disables.
+    max_level : float or None, keyword-only
+        Windows whose mean level exceeds this (image unit: a cloud threshold)
+        are rejected. None disables.
+
+    Returns
+    -------
+    ndarray of bool, shape of ``image``
+        True where the texture is good enough to match.
+    """
+    img = _as_image(image)
+    window = _check_window(window)
+    if not max_std > 0:
+        raise ValueError(f"max_std: must be > 0, got {max_std}")
+    if not min_contrast >= 0:
+        raise ValueError(f"min_contrast: must be >= 0, got {min_contrast}")
+    nodata = ~np.isfinite(img)
+    work = np.where(nodata, 0.0, img) if nodata.any() else img
+    sigma = estimate_noise(img) if noise_std is None else noise_std
+    if not (sigma is not None and float(sigma) >= 0):
+        raise ValueError(f"noise_std: must be >= 0, got {noise_std}")
+    std_l, std_c = expected_matching_std(work, window=window, noise_std=float(sigma))
+    ok = (std_l <= max_std) & (std_c <= max_std)
+    if min_contrast > 0 or max_level is not None:
+        npx = window[0] * window[1]
+        mean = _box_sum(work, window) / npx
+        if min_contrast > 0:
+            var = np.maximum(_box_sum(work * work, window) / npx - mean * mean, 0.0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ok &= np.sqrt(var) >= min_contrast * np.abs(mean)
+        if max_level is not None:
+            ok &= mean <= max_level
+    bad = nodata
+    if saturation is not None:
+        bad = bad | (np.where(nodata, -np.inf, img) >= saturation)
+    # the gradient reads 2 pixels beyond the window
+    if bad.any():
+        ok &= ~_dilate(bad, (window[0] + 4, window[1] + 4))
+    return ok
+
+
+def double_gradient_points(image, *, threshold=None, n_sigma=5.0, noise_std=None, min_distance=8,
+                           mask=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points whose second derivative exceeds a threshold in two directions.
+
+    The patent's "doble gradiente": the second derivative with respect to
+    distance, taken along lines, columns and both diagonals, gives the Hessian
+    at each pixel; the second derivative exceeds the threshold in two
+    orthogonal directions when both eigenvalues of the Hessian do. The score
+    is the smaller absolute eigenvalue: high on spots, corners and saddles,
+    zero on straight edges and ridges (which cannot be matched along them).
+    Points are kept where the score reaches the threshold and is a local
+    maximum along their line within ``min_distance`` columns.
+
+    Parameters
+    ----------
+    image : ndarray, shape (lines, columns)
+        Band A.
+    threshold : float or None, keyword-only
+        Threshold on the second derivative (image unit / px**2). None:
+        ``n_sigma`` times the noise standard deviation of a second
+        difference, ``sqrt(6) * noise_std``.
+    n_sigma : float, keyword-only
+        Threshold in noise standard deviations when ``threshold`` is None.
+    noise_std : float or None, keyword-only
+        Noise standard deviation (image unit); estimated when None.
+    min_distance : int, keyword-only
+        Non-maximum suppression half-width along the line (px).
+    mask : ndarray of bool or None, keyword-only
+        True where points are not allowed.
+
+    Returns
+    -------
+    lines, cols : ndarray of float, shape (N,)
+        Points (px), sorted by line then column.
+    score : ndarray of float, shape (N,)
+        Smaller absolute eigenvalue of the Hessian (image unit / px**2).
+    """
+    img = _as_image(image)
+    if int(min_distance) != min_distance or min_distance < 0:
+        raise ValueError(f"min_distance: must be an integer >= 0, got {min_distance}")
+    if threshold is None:
+        if not n_sigma > 0:
+            raise ValueError(f"n_sigma: must be > 0, got {n_sigma}")
+        sigma = estimate_noise(img) if noise_std is None else float(noise_std)
+        if not sigma >= 0:
+            raise ValueError(f"noise_std: must be >= 0, got {noise_std}")
+        threshold = n_sigma * np.sqrt(6.0) * sigma
+    elif not threshold >= 0:
+        raise ValueError(f"threshold: must be >= 0, got {threshold}")
+    p = np.pad(np.where(np.isfinite(img), img, np.nan), 1, mode="edge")
+    c = p[1:-1, 1:-1]
+    d_ll = p[2:, 1:-1] - 2 * c + p[:-2, 1:-1]                # along lines
+    d_cc = p[1:-1, 2:] - 2 * c + p[1:-1, :-2]                # along columns
+    d_1 = 0.5 * (p[2:, 2:] - 2 * c + p[:-2, :-2])            # diagonals: distance sqrt(2)
+    d_2 = 0.5 * (p[2:, :-2] - 2 * c + p[:-2, 2:])
+    h_lc = 0.5 * (d_1 - d_2)                                 # mixed derivative
+    mean = 0.5 * (d_ll + d_cc)
+    rad = np.hypot(0.5 * (d_ll - d_cc), h_lc)
+    score = np.minimum(np.abs(mean + rad), np.abs(mean - rad))
+    score = np.where(np.isfinite(score), score, -np.inf)
+    keep = score >= threshold
+    if min_distance > 0:
+        keep &= score >= ndimage.maximum_filter1d(score, 2 * int(min_distance) + 1, axis=1, mode="nearest")
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != img.shape:
+            raise ValueError(f"mask: expected shape {img.shape}, got {mask.shape}")
+        keep &= ~mask
+    li, ci = np.nonzero(keep)
+    return li.astype(float), ci.astype(float), score[li, ci]
+
+
+def grid_points(shape, *, step_lines=1, step_columns=32, margin=(0, 0), offset=(0, 0)):
+    """A predetermined grid of points, independent of the image content.
+
+    Parameters
+    ----------
+    shape : (int, int)
+        Image shape (lines, columns).
+    step_lines, step_columns : int, keyword-only
+        Grid steps (px).
+    margin : (int, int), keyword-only
+        No point closer than this to the borders (lines, columns), px.
+    offset : (int, int), keyword-only
+        Position of the first node after the margin (px).
+
+    Returns
+    -------
+    lines, cols : ndarray of float, shape (N,)
+        Nodes (px), sorted by line then column.
+    """
+    try:
+        n_lines, n_cols = (int(v) for v in shape)
+    except (TypeError, ValueError):
+        raise ValueError(f"shape: expected (lines, columns), got {shape!r}") from None
+    for name, v in (("step_lines", step_lines), ("step_columns", step_columns)):
+        if int(v) != v or v < 1:
+            raise ValueError(f"{name}: must be an integer >= 1, got {v}")
+    ml, mc = (int(v) for v in margin)
+    if ml < 0 or mc < 0:
+        raise ValueError(f"margin: must be >= 0, got {margin!r}")
+    ol, oc = (int(v) for v in offset)
+    lines = np.arange(ml + ol, n_lines - ml, int(step_lines), dtype=float)
+    cols = np.arange(mc + oc, n_cols - mc, int(step_columns), dtype=float)
+    ll, cc = np.meshgrid(lines, cols, indexing="ij")
+    return ll.ravel(), cc.ravel()
+
+
+def spread_quality_subset(lines, columns, quality, *, per_line, column_range=None, min_quality=None):
+    """Indices of the best point per column bin and line: spread and quality.
+
+    The column range is cut into ``per_line`` equal bins; on each line
+    (rounded), the point of highest quality in each bin is kept. Use it on
+    candidates before matching (a-priori quality) or after (match quality).
+
+    Parameters
+    ----------
+    lines, columns, quality : array_like of float, shape (N,)
+        Candidate points (px) and their quality (higher is better); points
+        with a non-finite quality are never kept.
+    per_line : int, keyword-only
+        Number of column bins, i.e. the most points kept per line.
+    column_range : (float, float) or None, keyword-only
+        Columns spanned by the bins (px); the candidates' range when None.
+    min_quality : float or None, keyword-only
+        Points below this quality are never kept.
+
+    Returns
+    -------
+    ndarray of int
+        Indices into the inputs, sorted by line then column.
+    """
+    li = np.asarray(lines, dtype=float)
+    co = np.asarray(columns, dtype=float)
+    q = np.asarray(quality, dtype=float)
+    if li.ndim != 1 or co.shape != li.shape or q.shape != li.shape:
+        raise ValueError(f"lines, columns, quality: expected three arrays of one shape (N,), got "
+                         f"{li.shape}, {co.shape}, {q.shape}")
+    if int(per_line) != per_line or per_line < 1:
+        raise ValueError(f"per_line: must be an integer >= 1, got {per_line}")
+    ok = np.isfinite(q) & np.isfinite(li) & np.isfinite(co)
+    if min_quality is not None:
+        ok &= q >= min_quality
+    idx = np.flatnonzero(ok)
+    if idx.size == 0:
+        return idx
+    if column_range is None:
+        c0, c1 = co[idx].min(), co[idx].max()
+    else:
+        c0, c1 = (float(v) for v in column_range)
+        if not c1 >= c0:
+            raise ValueError(f"column_range: expected (low, high) with high >= low, got {column_range!r}")
+        idx = idx[(co[idx] >= c0) & (co[idx] <= c1)]
+    width = max(c1 - c0, 1e-9) * (1 + 1e-12)
+    b = np.minimum(((co[idx] - c0) / width * per_line).astype(np.int64), per_line - 1)
+    ln = np.rint(li[idx]).astype(np.int64)
+    order = np.lexsort((-q[idx], b, ln))  # by line, bin, then best quality first
+    ln, b = ln[order], b[order]
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = (ln[1:] != ln[:-1]) | (b[1:] != b[:-1])
+    kept = idx[order[first]]
+    return kept[np.lexsort((co[kept], li[kept]))]
+
+
+def select_points(image, *, method="grid", per_line=20, window=(3, 31), search=(2, 2), margin=None,
+                  mask=None, line_mask=None, line_step=1, noise_std=None, max_std=0.1, min_contrast=0.0,
+                  saturation=None, max_level=None, threshold=None):
+    """Candidate points of band A for matching.
+
+    Parameters
+    ----------
+    image : ndarray, shape (lines, columns)
+        Band A.
+    method : {"grid", "double_gradient", "spread"}, keyword-only
+        ``grid``: ``per_line`` evenly spaced columns on every selected line,
+        kept where the texture criterion passes; ``double_gradient``: points
+        of :func:`double_gradient_points`, thinned to the best per column bin;
+        ``spread``: on every line, the pixel of smallest a-priori matching
+        standard deviation in each of ``per_line`` column bins.
+    per_line : int, keyword-only
+        Points wanted per line (CNES: 20).
+    window, search : (int, int), keyword-only
+        Matching window (lines, columns) and search half-range (px): they fix
+        the border margin.
+    margin : (int, int) or None, keyword-only
+        Border margin (lines, columns), px; :func:`restore.matching.support_margin`
+        (window half-size + search + interpolation support) when None.
+    mask : ndarray of bool or None, keyword-only
+        True where the image must not be used (clouds, water, no data known
+        beforehand); no window touches it.
+    line_mask : ndarray of bool or None, keyword-only
+        Per line, True where points may be taken (e.g. lines whose homologues
+        fall inside band B).
+    line_step : int, keyword-only
+        Take points every ``line_step`` lines.
+    noise_std, max_std, min_contrast, saturation, max_level : keyword-only
+        Texture criterion, see :func:`texture_mask`.
+    threshold : float or None, keyword-only
+        Double-gradient threshold, see :func:`double_gradient_points`.
+
+    Returns
+    -------
+    lines, cols : ndarray of float, shape (N,)
+        Points (px, pixel centres), sorted by line then column.
+    """
+    if method not in _METHODS:
+        raise ValueError(f"method: expected one of {_METHODS}, got {method!r}")
+    img = _as_image(image)
+    n_lines, n_cols = img.shape
+    window = _check_window(window)
+    if int(per_line) != per_line or per_line < 1:
+        raise ValueError(f"per_line: must be an integer >= 1, got {per_line}")
+    if int(line_step) != line_step or line_step < 1:
+        raise ValueError(f"line_step: must be an integer >= 1, got {line_step}")
+    if margin is None:
+        margin = support_margin(window=window, search=search)
+    try:
+        ml, mc = (int(v) for v in margin)
+    except (TypeError, ValueError):
+        raise ValueError(f"margin: expected (lines, columns), got {margin!r}") from None
+    ml = max(ml, window[0] // 2)
+    mc = max(mc, window[1] // 2)
+    if ml < 0 or mc < 0:
+        raise ValueError(f"margin: must be >= 0, got {margin!r}")
+    empty = (np.zeros(0), np.zeros(0))
+    if n_lines <= 2 * ml or n_cols <= 2 * mc:
+        return empty
+
+    usable = texture_mask(img, window=window, noise_std=noise_std, max_std=max_std, min_contrast=min_contrast,
+                          saturation=saturation, max_level=max_level)
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != img.shape:
+            raise ValueError(f"mask: expected shape {img.shape}, got {mask.shape}")
+        usable &= ~_dilate(mask, window)
+    rows = np.zeros(n_lines, dtype=bool)
+    rows[ml:n_lines - ml:int(line_step)] = True
+    if line_mask is not None:
+        line_mask = np.asarray(line_mask, dtype=bool)
+        if line_mask.shape != (n_lines,):
+            raise ValueError(f"line_mask: expected shape ({n_lines},), got {line_mask.shape}")
+        rows &= line_mask
+    usable[~rows] = False
+    usable[:, :mc] = False
+    usable[:, n_cols - mc:] = False
+    c_lo, c_hi = mc, n_cols - 1 - mc
+
+    if method == "grid":
+        cols = np.unique(np.rint(np.linspace(c_lo, c_hi, int(per_line))))
+        li = np.flatnonzero(rows)
+        ll, cc = np.meshgrid(li, cols.astype(np.int64), indexing="ij")
+        keep = usable[ll, cc]
+        return ll[keep].astype(float), cc[keep].astype(float)
+
+    if method == "double_gradient":
+        li, ci, score = double_gradient_points(img, threshold=threshold, noise_std=noise_std,
+                                               min_distance=max(1, (c_hi - c_lo) // (4 * int(per_line))),
+                                               mask=~usable)
+        keep = spread_quality_subset(li, ci, score, per_line=per_line, column_range=(c_lo, c_hi))
+        return li[keep], ci[keep]
+
+    # spread: best a-priori precision in each column bin of each line
+    std_l, std_c = expected_matching_std(np.where(np.isfinite(img), img, 0.0), window=window,
+                                         noise_std=noise_std)
+    quality = np.where(usable, -np.maximum(std_l, std_c), -np.inf)
+    li = np.flatnonzero(rows)
+    span = c_hi - c_lo + 1
+    nb = min(int(per_line), span)
+    bw = -(-span // nb)  # ceil
+    q = np.full((li.size, nb * bw), -np.inf)
+    q[:, :span] = quality[li, c_lo:c_hi + 1]
+    q = q.reshape(li.size, nb, bw)
+    best = np.argmax(q, axis=2)
+    ok = np.isfinite(np.take_along_axis(q, best[:, :, None], axis=2)[:, :, 0])
+    cols = c_lo + np.arange(nb)[None, :] * bw + best
+    ll = np.broadcast_to(li[:, None], cols.shape)
+    return ll[ok].astype(float), cols[ok].astype(float)

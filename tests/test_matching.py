@@ -1,0 +1,195 @@
+"""Sub-pixel matcher against analytic, exactly shifted band-limited windows."""
+import numpy as np
+import pytest
+
+from reports.bench_matching import synthetic_pairs
+from restore.matching import (MatchFlag, lanczos_weights, match_points, resample_windows,
+                              support_margin)
+
+
+def _errors(res, data):
+    return np.stack([res.line_b - data["lines"] - data["shift_lines"],
+                     res.col_b - data["cols"] - data["shift_cols"]], axis=1)
+
+
+def _locking(err, shift, n_bins=10):
+    """Worst mean error over bins of the fractional shift (pixel locking), px."""
+    frac = (shift + 0.5) % 1.0
+    b = np.minimum((frac * n_bins).astype(int), n_bins - 1)
+    return max(abs(err[b == k].mean()) for k in range(n_bins))
+
+
+def _match(data, **kw):
+    la, ca = data["lines"], data["cols"]
+    return match_points(data["image_a"], data["image_b"], la, ca, la, ca, **kw)
+
+
+@pytest.fixture(scope="module")
+def same():
+    # realistic texture (1/f spectrum, MTF 0.3 at Nyquist), noise 2 % of its std,
+    # random shifts in [-1.5, 1.5] px on both axes, 3 x 31 windows
+    return synthetic_pairs(seed=1, n=3000, case="same", noise=0.02, max_shift=1.5)
+
+
+@pytest.fixture(scope="module")
+def cross():
+    return synthetic_pairs(seed=2, n=2000, case="cross", noise=0.02, max_shift=1.5)
+
+
+@pytest.mark.parametrize("method, rms_max, lock_max", [("ncc", 0.012, 0.006), ("phase", 0.04, 0.015)])
+def test_same_band_known_shifts(same, method, rms_max, lock_max):
+    res = _match(same, window=(3, 31), search=(2, 2), method=method)
+    assert res.valid.mean() > 0.98
+    err = _errors(res, same)[res.valid]
+    for ax, key in enumerate(("shift_lines", "shift_cols")):
+        e = err[:, ax]
+        assert abs(e.mean()) <= 0.01 / 4  # bias, 4x inside the 0.01 px goal
+        assert _locking(e, same[key][res.valid]) <= lock_max
+        assert np.sqrt(np.mean(e**2)) <= rms_max
+    assert np.all(res.quality[res.valid] > 0.9)
+
+
+def test_ncc_no_pixel_locking_without_noise():
+    data = synthetic_pairs(seed=5, n=3000, case="same", noise=0.0)
+    res = _match(data)
+    err = _errors(res, data)
+    assert res.valid.all()
+    for ax, key in enumerate(("shift_lines", "shift_cols")):
+        assert _locking(err[:, ax], data[key]) <= 0.004
+        # the remaining error is the Lanczos-4 interpolation error on a
+        # texture with MTF 0.3 at Nyquist
+        assert np.sqrt(np.mean(err[:, ax] ** 2)) <= 0.008
+
+
+def test_cross_band_unbiased(cross):
+    res = _match(cross)
+    assert res.valid.mean() > 0.9
+    err = _errors(res, cross)[res.valid]
+    assert np.all(np.abs(err.mean(axis=0)) <= 0.01)
+    assert np.all(np.sqrt(np.mean(err**2, axis=0)) <= 0.25)
+
+
+def test_std_estimate_tracks_the_error():
+    data = synthetic_pairs(seed=4, n=2000, case="same", noise=0.05)
+    res = _match(data)
+    err = _errors(res, data)
+    for ax, std in enumerate((res.std_line, res.std_col)):
+        ratio = np.std(err[:, ax] / std)
+        assert 0.6 < ratio < 1.4
+
+
+def test_fractional_points_and_predictions(same):
+    la, ca = same["lines"][:500] + 0.3, same["cols"][:500] - 0.2
+    rng = np.random.default_rng(0)
+    # predictions off by up to 1.4 px from the truth, fractional
+    tl, tc = la + same["shift_lines"][:500], ca + same["shift_cols"][:500]
+    pl, pc = tl + rng.uniform(-0.4, 0.4, 500), tc + rng.uniform(-0.4, 0.4, 500)
+    res = match_points(same["image_a"], same["image_b"], la, ca, pl, pc, search=(2, 2))
+    assert res.valid.mean() > 0.98
+    # the match is reported for the fractional point itself (local translation)
+    assert np.sqrt(np.mean((res.line_b - tl)[res.valid] ** 2)) < 0.015
+    assert np.sqrt(np.mean((res.col_b - tc)[res.valid] ** 2)) < 0.015
+
+
+def test_flags():
+    data = synthetic_pairs(seed=3, n=200, case="same", noise=0.02, max_shift=0.0, search=(4, 4))
+    a, b = data["image_a"].copy(), data["image_b"].copy()
+    la, ca = data["lines"].copy(), data["cols"].copy()
+    pl, pc = la.copy(), ca.copy()
+    # 0: fine; 1: out of the image; 2: NaN in B's support; 3: flat A window;
+    # 4: prediction 3.4 lines off with a +-2 search
+    la[1] = 1.0
+    b[int(la[2]) + 2, int(ca[2]) + 5] = np.nan
+    a[int(la[3]) - 3:int(la[3]) + 4, :] = 7.0
+    pl[4] += 3.4
+    res = match_points(a, b, la, ca, pl, pc, search=(2, 2))
+    assert res.flags[0] == 0 and res.valid[0]
+    assert res.flags[1] & MatchFlag.OUT_OF_BOUNDS
+    assert res.flags[2] & MatchFlag.NO_DATA
+    assert res.flags[3] & MatchFlag.FLAT and np.isnan(res.quality[3])
+    assert res.flags[4] & MatchFlag.SEARCH_BORDER
+    assert not res.valid[1:5].any()
+    assert np.array_equal(res.valid, res.flags == 0)
+    # unrelated band: low correlation
+    noise = np.random.default_rng(0).standard_normal(b.shape)
+    res = match_points(a, noise, la[5:], ca[5:], pl[5:], pc[5:])
+    assert np.all(res.flags & MatchFlag.LOW_CORRELATION)
+    # a precision requirement nobody meets
+    res = match_points(a, b, la[5:], ca[5:], pl[5:], pc[5:], max_std=1e-6)
+    assert np.all(res.flags & MatchFlag.IMPRECISE)
+
+
+def test_empty_and_single_point(same):
+    res = match_points(same["image_a"], same["image_b"], [], [], [], [])
+    assert len(res) == 0 and res.valid.dtype == bool
+    la, ca = same["lines"][:1], same["cols"][:1]
+    res = match_points(same["image_a"], same["image_b"], la, ca, la, ca)
+    assert len(res) == 1 and res.valid[0]
+
+
+@pytest.mark.parametrize("kw, name", [
+    ({"method": "sad"}, "method"),
+    ({"window": (4, 31)}, "window"),
+    ({"window": (3,)}, "window"),
+    ({"search": (-1, 2)}, "search"),
+    ({"min_quality": 1.5}, "min_quality"),
+    ({"max_std": 0.0}, "max_std"),
+    ({"order": 0}, "order"),
+    ({"max_iter": 0}, "max_iter"),
+    ({"tol": -1.0}, "tol"),
+])
+def test_bad_parameters(kw, name):
+    img = np.zeros((50, 80))
+    with pytest.raises(ValueError, match=name):
+        match_points(img, img, [25.0], [40.0], [25.0], [40.0], **kw)
+
+
+def test_bad_points_and_images():
+    img = np.zeros((50, 80))
+    with pytest.raises(ValueError, match="cols_a"):
+        match_points(img, img, [25.0, 26.0], [40.0], [25.0, 26.0], [40.0, 40.0])
+    with pytest.raises(ValueError, match="pred_lines_b"):
+        match_points(img, img, [25.0], [40.0], [np.nan], [40.0])
+    with pytest.raises(ValueError, match="image_b"):
+        match_points(img, img[0], [25.0], [40.0], [25.0], [40.0])
+
+
+def test_lanczos_weights():
+    w = lanczos_weights([0.0, 0.25, -0.5, 0.9], order=4)
+    assert w.shape == (4, 9)
+    assert np.allclose(w.sum(axis=1), 1.0)
+    assert np.array_equal(w[0], np.eye(9)[4])  # integer position: no smoothing
+    # half pixel: symmetric about -0.5, the tap at +4 is outside the support
+    assert np.allclose(w[2][:8], w[2][7::-1]) and w[2][8] == 0.0
+    k = np.arange(-4, 5)
+    x = k - 0.25
+    ref = np.where(np.abs(x) < 4, np.sinc(x) * np.sinc(x / 4), 0.0)
+    assert np.allclose(w[1], ref / ref.sum())
+    with pytest.raises(ValueError, match="shift"):
+        lanczos_weights([1.0])
+    with pytest.raises(ValueError, match="order"):
+        lanczos_weights([0.0], order=0)
+
+
+def test_resample_windows_band_limited():
+    rng = np.random.default_rng(0)
+    n, order = 50, 4
+    dl, dc = rng.uniform(-0.9, 0.9, n), rng.uniform(-0.9, 0.9, n)
+    fl, fc = 0.08, 0.11  # cycles/px, well inside the band
+    li = np.arange(3 + 2 * order) - order
+    ci = np.arange(31 + 2 * order) - order
+    patches = np.cos(2 * np.pi * (fl * li[None, :, None] + fc * ci[None, None, :])) * np.ones((n, 1, 1))
+    out = resample_windows(patches, dl, dc, order=order)
+    exact = np.cos(2 * np.pi * (fl * (np.arange(3)[None, :, None] + dl[:, None, None])
+                                + fc * (np.arange(31)[None, None, :] + dc[:, None, None])))
+    assert np.max(np.abs(out - exact)) < 1e-2  # the kernel's pass-band ripple
+    # zero shift: the central window, untouched
+    out0 = resample_windows(patches, np.zeros(n), np.zeros(n), order=order)
+    assert np.array_equal(out0, patches[:, order:-order, order:-order])
+
+
+def test_support_margin():
+    assert support_margin(window=(3, 31), search=(2, 2), order=4) == (7, 21)
+    assert support_margin(window=(1, 5), search=(0, 0), order=1) == (2, 4)
+    with pytest.raises(ValueError, match="window"):
+        support_margin(window=(2, 31))

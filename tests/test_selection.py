@@ -1,0 +1,169 @@
+"""Characteristic-point selection: texture criterion and the patent's three methods."""
+import numpy as np
+import pytest
+
+from reports.bench_matching import _evaluate, _texture_terms
+from restore.matching import support_margin
+from restore.selection import (double_gradient_points, estimate_noise, expected_matching_std,
+                               gradient_energy, grid_points, select_points, spread_quality_subset,
+                               texture_mask)
+
+NOISE = 0.5
+L, C = 160, 640
+WATER = (slice(None), slice(250, 360))      # dark, flat
+CLOUD = (slice(40, 110), slice(450, 560))   # bright, saturated
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """Textured ground (std 10 around 100) with a water band and a saturated cloud."""
+    rng = np.random.default_rng(0)
+    f, ph, amp = _texture_terms(rng, 1, 300, 0.3, 0.02)
+    amp = amp / np.sqrt(0.5 * np.sum(amp**2))
+    img = 100.0 + 10.0 * _evaluate(f, ph, amp, np.arange(L, dtype=float)[None], np.arange(C, dtype=float)[None])[0]
+    img[WATER] = 20.0
+    img[CLOUD] = 4095.0
+    img += NOISE * rng.standard_normal(img.shape)
+    img[CLOUD] = np.minimum(img[CLOUD], 4095.0)
+    return img
+
+
+def test_estimate_noise_on_white_noise():
+    rng = np.random.default_rng(1)
+    img = 3.0 * rng.standard_normal((400, 400)) + np.linspace(0, 50, 400)[None, :]  # a plane is ignored
+    assert estimate_noise(img) == pytest.approx(3.0, rel=0.05)
+
+
+def test_expected_std_matches_delon_rouge_on_a_sinusoid():
+    # one full period per 31-column window: sum of cos^2 over it is exactly 31 / 2
+    amp, w = 5.0, 31
+    omega = 2 * np.pi / w
+    img = amp * np.sin(omega * np.arange(200))[None, :] * np.ones((20, 1))
+    gain = (8 * np.sin(omega) - np.sin(2 * omega)) / 6  # response of the 5-point gradient
+    e_l, e_c = gradient_energy(img, window=(3, w))
+    assert np.allclose(e_c[5:-5, 40:-40], 3 * (w / 2) * (amp * gain) ** 2, rtol=1e-9)
+    assert np.allclose(e_l[5:-5], 0.0, atol=1e-12)
+    std_l, std_c = expected_matching_std(img, window=(3, w), noise_std=0.1)
+    assert np.allclose(std_c[5:-5, 40:-40], np.sqrt(2) * 0.1 / np.sqrt(3 * (w / 2)) / (amp * gain))
+    assert np.all(std_l[5:-5, 40:-40] > 1e3)  # no texture along the lines: unmatchable
+
+
+def test_texture_mask_rejects_water_cloud_and_no_data(scene):
+    img = scene.copy()
+    img[130:140, 20:60] = np.nan
+    ok = texture_mask(img, window=(3, 31), noise_std=NOISE, max_std=0.05, saturation=4095.0)
+    assert ok[10:30, 20:230].mean() > 0.95            # textured ground
+    assert not ok[:, 266:344].any()                    # windows fully inside the water
+    assert not ok[40 - 1:110 + 1, 450 - 15:560 + 15].any()  # windows touching the cloud
+    assert not ok[130 - 1:140 + 1, 20 - 15:60 + 15].any()   # windows touching no data
+    # bright and smooth without saturation: the relative contrast criterion
+    smooth = 3000.0 + 0.5 * np.random.default_rng(2).standard_normal((40, 100)) + np.linspace(0, 30, 100)
+    assert texture_mask(smooth, noise_std=0.5, max_std=10.0).mean() > 0.5
+    assert not texture_mask(smooth, noise_std=0.5, max_std=10.0, min_contrast=0.01).any()
+    assert not texture_mask(smooth, noise_std=0.5, max_std=10.0, max_level=2000.0).any()
+
+
+def test_texture_mask_bad_parameters(scene):
+    with pytest.raises(ValueError, match="max_std"):
+        texture_mask(scene, max_std=0.0)
+    with pytest.raises(ValueError, match="window"):
+        texture_mask(scene, window=(2, 31))
+    with pytest.raises(ValueError, match="min_contrast"):
+        texture_mask(scene, min_contrast=-1.0)
+
+
+def test_double_gradient_keeps_spots_and_rejects_ridges():
+    rng = np.random.default_rng(3)
+    img = 0.2 * rng.standard_normal((60, 200))
+    spots = [(10, 30), (25, 100), (40, 170)]
+    for l, c in spots:
+        img[l, c] += 20.0
+    img[:, 60] += 20.0   # a straight ridge along the lines
+    img[50, :] += 20.0   # and one along the columns
+    li, ci, score = double_gradient_points(img, noise_std=0.2, n_sigma=5.0, min_distance=4)
+    found = set(zip(li.astype(int), ci.astype(int)))
+    assert set(spots) <= found
+    # nothing on the ridges away from the spots and their crossing
+    assert not np.any((ci == 60) & (np.abs(li - 50) > 1))
+    assert not np.any((li == 50) & (np.abs(ci - 60) > 1))
+    assert np.all(score >= 5.0 * np.sqrt(6) * 0.2)
+    with pytest.raises(ValueError, match="min_distance"):
+        double_gradient_points(img, min_distance=-1)
+
+
+def test_grid_points():
+    li, ci = grid_points((100, 200), step_lines=10, step_columns=50, margin=(5, 20))
+    assert np.array_equal(np.unique(li), np.arange(5, 95, 10))
+    assert np.array_equal(np.unique(ci), np.array([20, 70, 120, 170]))
+    assert li.size == 9 * 4
+    with pytest.raises(ValueError, match="step_columns"):
+        grid_points((100, 200), step_columns=0)
+    with pytest.raises(ValueError, match="margin"):
+        grid_points((100, 200), margin=(-1, 0))
+
+
+def test_spread_quality_subset_is_best_per_bin_and_line():
+    rng = np.random.default_rng(4)
+    n = 3000
+    li = rng.integers(0, 30, n).astype(float)
+    co = rng.uniform(0, 500, n)
+    q = rng.uniform(0, 1, n)
+    q[:50] = np.nan
+    keep = spread_quality_subset(li, co, q, per_line=10, column_range=(0, 500))
+    # brute force reference
+    ref = set()
+    for line in range(30):
+        for b in range(10):
+            sel = np.flatnonzero((li == line) & (co >= 50 * b) & (co < 50 * (b + 1)) & np.isfinite(q))
+            if sel.size:
+                ref.add(sel[np.argmax(q[sel])])
+    assert set(keep.tolist()) == ref
+    assert np.all(np.diff(li[keep]) >= 0)
+    assert np.bincount(li[keep].astype(int)).max() <= 10
+    with pytest.raises(ValueError, match="per_line"):
+        spread_quality_subset(li, co, q, per_line=0)
+    assert spread_quality_subset(li, co, q, per_line=5, min_quality=2.0).size == 0
+
+
+@pytest.mark.parametrize("method", ["grid", "double_gradient", "spread"])
+def test_select_points(scene, method):
+    window, search = (3, 31), (2, 2)
+    mask = np.zeros(scene.shape, dtype=bool)
+    mask[120:130, 50:120] = True  # e.g. a cloud known beforehand
+    li, ci = select_points(scene, method=method, per_line=20, window=window, search=search, mask=mask,
+                           noise_std=NOISE, saturation=4095.0)
+    assert li.dtype == float and li.shape == ci.shape
+    assert np.array_equal(li, np.rint(li)) and np.array_equal(ci, np.rint(ci))
+    assert np.all(np.diff(li) >= 0)
+    ml, mc = support_margin(window=window, search=search)
+    assert li.min() >= ml and li.max() <= L - 1 - ml
+    assert ci.min() >= mc and ci.max() <= C - 1 - mc
+    # no window touches the mask, the cloud or the inside of the water band
+    hl, hc = window[0] // 2, window[1] // 2
+    touches = lambda r0, r1, c0, c1: (li + hl >= r0) & (li - hl < r1) & (ci + hc >= c0) & (ci - hc < c1)
+    assert not np.any(touches(120, 130, 50, 120))
+    assert not np.any(touches(40, 110, 450, 560))
+    assert not np.any((ci - hc >= 250) & (ci + hc < 360))
+    # about 20 points per line where the texture allows (the water band and the
+    # cloud take away 2 to 6 of the 20 column bins)
+    clear = (li >= 10) & (li < 38)
+    per_line = np.bincount(li[clear].astype(int))[10:38]
+    assert np.median(per_line) >= 14
+    assert per_line.max() <= 20
+
+
+def test_select_points_line_mask_and_step(scene):
+    line_mask = np.zeros(L, dtype=bool)
+    line_mask[20:60] = True
+    li, ci = select_points(scene, per_line=10, line_mask=line_mask, line_step=5, noise_std=NOISE,
+                           saturation=4095.0, margin=(7, 21))
+    assert set(np.unique(li).astype(int)) <= set(range(20, 60))
+    assert np.all((li - 7) % 5 == 0)
+
+
+@pytest.mark.parametrize("kw, name", [({"method": "random"}, "method"), ({"per_line": 0}, "per_line"),
+                                      ({"line_step": 0}, "line_step"), ({"mask": np.zeros((3, 3), bool)}, "mask"),
+                                      ({"line_mask": np.zeros(3, bool)}, "line_mask")])
+def test_select_points_bad_parameters(scene, kw, name):
+    with pytest.raises(ValueError, match=name):
+        select_points(scene, **kw)
