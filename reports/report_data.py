@@ -455,7 +455,7 @@ def headline(run: RunData) -> dict:
             ok &= good
             checks.append(f"worst-axis {label} {worst[wkey]:.4f} px {'≤' if good else '>'} {req[key]:g} px")
     res["passed"] = ok
-    res["verdict"] = ("PASS" if ok else "FAIL") + ": " + "; ".join(checks)
+    res["verdict"] = ("PASS" if ok else "FAIL") + ": " + "; ".join(checks) + f" (restored axes: {', '.join(axes_r)})"
     return res
 
 

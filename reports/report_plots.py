@@ -147,13 +147,12 @@ def draw_spectra(axs, spec: dict, *, taus, pair_names, f_max: float, axes=AXES):
     for ax, a in zip(axs, axes):
         for key, label, color, ls in styles:
             k = f"psd_{key}_{a}"
-            if k in spec:
+            if k in spec and np.nanmax(spec[k][sel], initial=0.0) > 0:
                 ax.semilogy(f[sel], spec[k][sel] * URAD ** 2, color=color, ls=ls, lw=1.1, label=label)
         _mark_pairs(ax, taus, pair_names, f_max)
         ax.set_ylabel(f"{a} PSD\n[µrad²/Hz]")
-        if not any(k == f"psd_correction_{a}" and np.nanmax(spec[k]) > 0 for k in spec) and \
-                f"psd_delta_{a}" in spec and any(k.startswith("psd_correction_") for k in spec):
-            ax.set_title(f"{a}: not restored", fontsize=9, loc="left")
+        if f"psd_correction_{a}" in spec and not np.nanmax(spec[f"psd_correction_{a}"], initial=0.0) > 0:
+            ax.set_title(f"{a}: not restored (no correction)", fontsize=9, loc="left")
         ax.set_xlim(0, f_max)
         if not ax.lines:
             ax.text(0.5, 0.5, "no data", transform=ax.transAxes, ha="center", va="center")

@@ -230,10 +230,12 @@ def _attitude_section(pg: _Page, run: D.RunData, sc: dict, hd: dict):
         if "rms_px" in d:
             extra = (f" Restored error RMS {d['rms_px']:.4f} px / 99.7 % {d['p997_px']:.4f} px; "
                      f"AOCS {d['knowledge_rms_px']:.4f} / {d['knowledge_p997_px']:.4f} px.")
+        what = ", ".join(x for x, ok in (("true", run.truth is not None), ("AOCS knowledge", True),
+                                          ("restored", run.restoration is not None)) if ok)
+        errs = " and errors (mean removed)" if run.truth is not None else " (errors need truth)"
         pg.figure(fig, f"attitude_{a}.png",
-                  f"{a}: true, AOCS knowledge and restored (left: whole record, envelope-decimated; right: "
-                  f"{1e3 * (zoom[1] - zoom[0]):.0f} ms zoom, every line) and errors (mean removed, µrad; px on the "
-                  f"right axis).{extra}")
+                  f"{a}: {what} (left: whole record, envelope-decimated; right: "
+                  f"{1e3 * (zoom[1] - zoom[0]):.0f} ms zoom, every line){errs}; µrad, px on the right axis.{extra}")
     pg.para(f"Data (every line, µrad): {link}", "files")
 
 
@@ -412,13 +414,18 @@ def _budget_section(pg: _Page, run: D.RunData, integrate, max_integration_s: flo
         fig, ax = P.new_axes(figsize=(10.0, 1.3 + 1.2 * len({r['axis'] for r in rows})))
         RP.draw_budget(ax, rows)
         pg.figure(fig, "budget.png", "Error budget per axis (log scale).")
-    pg.para("Matching noise: white noise with the per-line formal σ of the differentials (scatter of the inlier "
-            "residuals) propagated through the same integration. Measurement: measured − true differentials "
-            "(truth θ(t+τ) − θ(t) of true − knowledge, minus the previous iterations' estimate) integrated; "
-            "model / synthesis = the part of it the matching noise does not explain (quadrature). Integration: the "
-            "true differentials integrated minus the truth (blind frequencies, regularisation, ends). All errors "
-            "over the estimated lines, mean removed; 99.7 % figures combine in quadrature only approximately.",
-            "meta")
+    txt = ("<b>Matching noise</b>: white noise with the per-line formal σ of the differentials (from the scatter "
+           "of the inlier match residuals) added to the differentials and integrated with the run's method: "
+           "integrate(d + noise) − integrate(d), one seeded draw. ")
+    if run.truth is not None:
+        txt += ("<b>Integration</b>: the true differentials θ(t+τ) − θ(t) of the true remaining error (true − "
+                "knowledge − earlier iterations' estimate), with the same gaps, integrated, minus the truth: blind "
+                "frequencies, regularisation, ends. <b>Measurement</b> = total − integration: the cost of the errors "
+                "of the measured differentials; <b>model / synthesis</b> = the part of it matching noise does not "
+                "explain, √(measurement² − noise²) (the 99.7 % figures combine this way only approximately). ")
+    txt += ("Methods that adapt to their data (wiener) are frozen on the measured differentials first, so every row "
+            "goes through the filter actually applied. All errors over the estimated lines, mean removed.")
+    pg.para(txt, "meta")
     for n in bud["notes"]:
         pg.note(_e(n))
     table = {k: [r.get(k, "") for r in rows] for k in ("axis", "component", "rms_px", "p997_px", "rms_urad",
@@ -494,7 +501,9 @@ def _matches_section(pg: _Page, run: D.RunData):
         link = pg.csv("misregistration.csv", {k: [r[k] for r in mis] for k in mis[0]})
         pg.para(f"Data: {link}", "files")
     elif run.restoration is not None:
-        pg.note("No misregistration figures in restoration.nc (image correction disabled?).")
+        why = (" (image correction disabled: restoration.correct_images = false)"
+               if run.settings.get("correct_images") is False else "")
+        pg.note(_e(f"No band-to-band misregistration in restoration.nc{why}."))
 
 
 def _scene_section(pg: _Page, run: D.RunData, mode: str, timeout_s: float, report_notes: list):

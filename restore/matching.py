@@ -61,7 +61,7 @@ __all__ = [
 
 _METHODS = ("ncc", "phase")
 #: points per batch: keeps the stacks in cache and bounds memory
-_CHUNK = 1024
+_CHUNK = 512
 #: antisymmetric gradient filter of the A window (Gauss-Newton Jacobian), 1/px
 _GRADIENT = np.array([1.0, -8.0, 0.0, 8.0, -1.0]) / 12.0
 _G = _GRADIENT.size // 2

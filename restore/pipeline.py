@@ -57,7 +57,6 @@ class RestorationSettings:
     highpass_hz: float = 8.0
     max_gap_fill_lines: int = 8
     compensate_window: bool = True
-    time_sync_iterations: int = 4
     method: str | None = None
     integration_options: dict = field(default_factory=dict)
     iterations: int = 1
@@ -97,12 +96,12 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.highpass_hz = sec.number("highpass_hz", s.highpass_hz, ge=0)
     s.max_gap_fill_lines = sec.integer("max_gap_fill_lines", s.max_gap_fill_lines, ge=0)
     s.compensate_window = sec.boolean("compensate_window", s.compensate_window)
-    s.time_sync_iterations = sec.integer("time_sync_iterations", s.time_sync_iterations, ge=1, le=20)
     m = sec.raw("method", None)
     if m is not None:
         from .integration import METHODS
-        if not isinstance(m, str) or m not in METHODS:
-            raise sec.error("method", f"must be one of {', '.join(METHODS)}; got {m!r}")
+        allowed = sorted(set(METHODS) | {"lsq"})
+        if not isinstance(m, str) or m not in allowed:
+            raise sec.error("method", f"must be one of {', '.join(allowed)}; got {m!r}")
     s.method = m
     opts = sec.section("integration")
     s.integration_options = dict(opts.data)
@@ -238,7 +237,7 @@ class _Progress:
             self.bar.close()
 
 
-def _grid_points_fallback(image, *, method, per_line, window, margin, line_mask):
+def _grid_points_fallback(image, *, method, per_line, window, margin, line_mask, search=None):
     n_lines, n_cols = image.shape
     ml, mc = margin
     cols = np.linspace(mc + 1, n_cols - mc - 2, per_line)
@@ -275,34 +274,34 @@ def _shifted(x: np.ndarray, t_idx: np.ndarray) -> np.ndarray:
     return out
 
 
-def _integrate_time_sync(diffs, taus, lags, te, *, method, settings) -> np.ndarray:
+def _integrate_time_sync(diffs, taus, lags, te, *, method, settings, sigmas=None) -> np.ndarray:
     """Integrate differentials whose actual lag varies line by line (time synchronisation).
 
-    Fixed point: with the current estimate θ̂, each measured differential
-    D_j(t) ≈ θ(t + τ_j + λ_j(t)) − θ(t) is brought back to the constant lag τ_j
-    by subtracting θ̂(t + τ_j + λ_j(t)) − θ̂(t + τ_j), then integrated again.
-    The correction is first order in λ_j·θ̂', so a few iterations converge.
+    ``lsq`` models the per-line lags exactly (each line is an equation
+    θ(t + τ_j + λ_j(t)) − θ(t) = D_j(t)). Other methods assume constant lags:
+    the differentials are first brought back to the nominal lag with the
+    ``lsq`` estimate θ̂ — D_j − [θ̂(t + τ_j + λ_j) − θ̂(t + τ_j)] — then
+    integrated by the chosen method.
     """
     from .integration import integrate
+    from .integration.lsq import integrate_lsq
 
-    n = len(diffs[0])
-    idx = np.arange(n, dtype=np.float64)
-    est = np.zeros(n)
-    n_iter = max(1, settings.time_sync_iterations)
-    for k in range(n_iter):
+    hp = settings.highpass_hz
+    if hp > 0:
+        diffs = [highpass_nan(d, dt=te, cutoff_hz=hp) for d in diffs]
+    est = integrate_lsq(diffs, taus, te, lags=lags, sigmas=sigmas)
+    if method != "lsq":
+        n = len(diffs[0])
+        idx = np.arange(n, dtype=np.float64)
         corrected = []
         for d, tau, lag in zip(diffs, taus, lags):
-            if k > 0:
-                base = idx + tau / te
-                d = d - (_shifted(est, base + lag / te) - _shifted(est, base))
-            if settings.highpass_hz > 0:
-                d = highpass_nan(d, dt=te, cutoff_hz=settings.highpass_hz)
-            corrected.append(d)
-        inc = np.asarray(integrate(corrected, taus, te, method=method, **settings.integration_options), dtype=np.float64)
-        if settings.highpass_hz > 0:
-            # the AOCS knows the low frequencies: keep only what the images add
-            inc = highpass_nan(inc, dt=te, cutoff_hz=settings.highpass_hz)
-        est = inc
+            base = idx + tau / te
+            corrected.append(d - (_shifted(est, base + lag / te) - _shifted(est, base)))
+        est = np.asarray(integrate(corrected, taus, te, method=method, **settings.integration_options),
+                         dtype=np.float64)
+    if hp > 0:
+        # the AOCS knows the low frequencies: keep only what the images add
+        est = highpass_nan(est, dt=te, cutoff_hz=hp)
     return est
 
 
@@ -331,7 +330,8 @@ def match_pair(product: Product, ahead: str, behind: str, settings: RestorationS
                                f"{shift_lines:.1f} lines")
     usable[lo:hi] = True
     lines_a, cols_a = select_points(img_a, method=settings.selection, per_line=settings.points_per_line,
-                                    window=settings.window, margin=(ml, mc), line_mask=usable)
+                                    window=settings.window, search=settings.search, margin=(ml, mc),
+                                    line_mask=usable)
     name = f"{ahead}/{behind}"
     if lines_a.size == 0:
         return PairData(name=name, ahead=ahead, behind=behind, tau_s=tau, line_a=lines_a, col_a=cols_a,
@@ -417,7 +417,7 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
         kr, kp, ky = kn.at(t_line)
         knowledge = {"roll": kr, "pitch": kp, "yaw": ky}
         estimate = {a: np.zeros(n_lines) for a in AXES}
-        method = settings.method or DEFAULT_METHOD
+        method = settings.method or "lsq"
         t_syn = t_int = 0.0
         valid_est = {a: np.ones(n_lines, dtype=bool) for a in AXES}
         for it in range(settings.iterations):
@@ -429,6 +429,7 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
                 cur = {a: knowledge[a] + np.nan_to_num(estimate[a]) for a in AXES}
                 sm_it = product.sensor_model(attitude=clamped_attitude(_series(t_line, cur)))
             diffs = {a: [] for a in AXES}
+            sigmas = {a: [] for a in AXES}
             taus = []
             lags = []
             for p in pairs:
@@ -440,13 +441,15 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
                     if settings.compensate_window:
                         d = window_compensation(d, window_lines=settings.window[0])
                     diffs[a].append(d)
+                    sigmas[a].append(res.sigma[:, k])
             t_syn += _time.perf_counter() - ts
             ti = _time.perf_counter()
             for a in settings.axes:
                 if all(np.all(~np.isfinite(d)) for d in diffs[a]):
                     raise RestorationError(f"{product.path}: no line could be synthesised on {a} "
                                            "(too few good matches per line)")
-                inc = _integrate_time_sync(diffs[a], taus, lags, te, method=method, settings=settings)
+                inc = _integrate_time_sync(diffs[a], taus, lags, te, method=method, settings=settings,
+                                           sigmas=sigmas[a])
                 valid_est[a] = np.isfinite(inc)
                 estimate[a] = np.where(np.isfinite(inc), np.nan_to_num(estimate[a]) + inc, np.nan)
             t_int += _time.perf_counter() - ti

@@ -165,7 +165,7 @@ def estimate_noise(diffs, taus, dt, *, n_fft: int | None = None) -> np.ndarray:
 def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=None,
                       resolution_hz: float = 0.5, detection_hz: float = 2.0,
                       false_alarm: float = 0.01, dilate_hz: float = 1.0,
-                      noise_floor: float = 1e-4) -> SpectralEstimate:
+                      noise_floor: float = 1e-4, min_gain: float = 0.1) -> SpectralEstimate:
     """Estimate the signal PSD and the noise levels from the differentials.
 
     Parameters
@@ -187,6 +187,10 @@ def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=No
     noise_floor : float
         Lower bound of the noise standard deviation relative to the
         differentials' standard deviation (keeps noise-free data well posed).
+    min_gain : float
+        Where ``sum_j |G_j|²`` (noise-weighted) is below this, i.e. near the
+        blind frequencies and 0 Hz, the PSD is interpolated linearly from the
+        nearest well-observed frequencies instead of divided by ~0.
 
     Returns
     -------
@@ -233,6 +237,13 @@ def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=No
     if Ld > 1:
         detected = maximum_filter1d(detected.astype(np.uint8), Ld).astype(bool)
     S = np.where(detected, s_fine, 0.0)
+    # Near blind frequencies (and 0 Hz) the ratio (P - nu) / |G|² is meaningless (leakage
+    # and noise divided by ~0): bridge those bins linearly from well-observed neighbours.
+    info = (g2 * (nu.min() / nu)[:, None]).sum(0)
+    poor = info < min_gain
+    if poor.any() and (~poor).any():
+        good = np.flatnonzero(~poor)
+        S[poor] = np.interp(np.flatnonzero(poor), good, S[good], left=0.0, right=0.0)
     S[0] = 0.0
     if n_fft % 2 == 0:
         S[-1] = 0.0
