@@ -7,11 +7,12 @@ exactly shifted coordinates, so the reference shift carries no interpolation
 error. Two cases:
 
 ``same``
-    Band B is band A shifted, each with its own white noise.
+    Band B is band A shifted, each with its own white noise (and its own
+    level: 10 and 7 texture standard deviations).
 ``cross``
     Bands A and B are different linear mixes of three independent texture
-    components (spectral bands correlated but not identical), shifted, with
-    noise.
+    components (spectral bands correlated but not identical: correlation
+    0.85, gain 1.3), shifted, with noise.
 
 Every method sees the same windows. Ours (``ncc`` and ``phase`` of
 :func:`restore.matching.match_points`, one batched call) read band B around
@@ -118,10 +119,11 @@ def synthetic_pairs(*, seed=0, n=2000, window=(3, 31), search=(2, 2), max_shift=
     if case == "same":
         mix_a = mix_b = np.array([1.0])
     else:
-        # unit vectors at angle acos(band_correlation), plus different gains
-        t = np.arccos(band_correlation)
-        mix_a = np.array([np.cos(0.3 * t), np.sin(0.3 * t), 0.0])
-        mix_b = 1.3 * np.array([np.cos(-0.7 * t), 0.0, np.sin(-0.7 * t)])
+        # a shared component plus one of its own for each band: correlation
+        # cos(t)**2 = band_correlation; band B has another gain
+        t = np.arccos(np.sqrt(band_correlation))
+        mix_a = np.array([np.cos(t), np.sin(t), 0.0])
+        mix_b = 1.3 * np.array([np.cos(t), 0.0, np.sin(t)])
     img_a = np.zeros((n, pl, pc))
     img_b = np.zeros((n, pl, pc))
     for j in range(n_comp):  # a handful of texture components

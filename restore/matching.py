@@ -66,6 +66,7 @@ _CHUNK = 512
 _GRADIENT = np.array([1.0, -8.0, 0.0, 8.0, -1.0]) / 12.0
 _G = _GRADIENT.size // 2
 _F32 = np.float32
+_KMIN, _KMAX = 0.2, 2.0
 
 
 class MatchFlag(enum.IntFlag):
@@ -161,12 +162,14 @@ def lanczos_weights(shift, *, order: int = 4) -> np.ndarray:
     # sinc(x) sinc(x/a) = -a sin(pi d) (-1)^k sin(pi x / a) / (pi x)^2; the
     # factor common to all taps cancels in the normalisation
     s, c = np.sin(np.pi * d / order)[:, None], np.cos(np.pi * d / order)[:, None]
-    num = np.cos(np.pi * k) * (np.sin(np.pi * k / order) * c - np.cos(np.pi * k / order) * s)
-    at_tap = np.abs(x) < 1e-9
-    x2 = np.where(at_tap, 1.0, x * x)
-    w = np.where(np.abs(x) < order, num / x2, 0.0)
-    w = np.where(at_tap.any(axis=1, keepdims=True), at_tap.astype(float), w)
-    return w / w.sum(axis=1, keepdims=True)
+    sk, ck = np.cos(np.pi * k) * np.sin(np.pi * k / order), np.cos(np.pi * k) * np.cos(np.pi * k / order)
+    w = (sk * c - ck * s) / np.where(x == 0.0, 1.0, x * x)
+    w[np.abs(x) >= order] = 0.0
+    on_tap = d == np.rint(d)  # integer position: the sample itself
+    if on_tap.any():
+        w[on_tap] = (x[on_tap] == 0.0).astype(float)
+    w /= w.sum(axis=1, keepdims=True)
+    return w
 
 
 def resample_windows(patches: np.ndarray, shift_lines, shift_cols, *, order: int = 4) -> np.ndarray:
@@ -539,6 +542,8 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
     if method == "phase":
         fa = np.fft.rfft2(a_z)
         grids = _phase_grids(h, w)
+    lk = np.concatenate([ninv[:, 1:, :], normal[:, None, :, 0]], axis=1)  # (N, 3, 3) step operator
+    inv_a2 = 1.0 / np.where(a_norm2 > 0, a_norm2, 1.0)
     active = np.flatnonzero(~converged)
     for it in range(max_iter + 1):
         if active.size == 0:
@@ -550,32 +555,38 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
             b_res = resample_windows(patch[sel], d[sel, 0], d[sel, 1], order=order)
         b_flat = b_res.reshape(-1, npx)
         c = np.matmul(jac[sel], b_flat[:, :, None])[:, :, 0].astype(np.float64)
-        b_mean = b_flat.mean(axis=1, dtype=np.float64)
-        sb = np.einsum("np,np->n", b_flat, b_flat).astype(np.float64) - npx * b_mean**2
+        b_sum = b_flat.sum(axis=1, dtype=np.float64)
+        sb = np.einsum("np,np->n", b_flat, b_flat).astype(np.float64) - b_sum * b_sum / npx
         stats[sel, :3] = c
         stats[sel, 3] = sb
         if it == max_iter:
             break
         if method == "ncc" or it == 0:
-            gain = c[:, 0] / a_norm2[sel]  # gain projected out (variable projection)
-            p = np.einsum("nij,nj->ni", ninv[sel, 1:], c - gain[:, None] * normal[sel, :, 0])
-            f = p / -np.where(np.abs(gain) > 1e-12, gain, 1.0)[:, None]
+            # Gauss-Newton step with the gain projected out (variable projection)
+            gain = c[:, 0] * inv_a2[sel]
+            op = lk[sel]
+            rhs = c - gain[:, None] * op[:, 2]
+            safe = -1.0 / np.where(np.abs(gain) > 1e-12, gain, 1.0)
+            f = np.stack([np.einsum("nj,nj->n", op[:, 0], rhs),
+                          np.einsum("nj,nj->n", op[:, 1], rhs)], axis=1) * safe[:, None]
         ph = f
         if method == "phase":
-            ph = np.column_stack(_phase_shift(fa[sel], b_res - b_mean[:, None, None].astype(_F32), grids))
+            b_c = b_res - (b_sum / npx).astype(_F32)[:, None, None]
+            ph = np.column_stack(_phase_shift(fa[sel], b_c, grids))
             f = ph if it > 0 else f
         # F(d) has its root at the match but a slope that is not exactly -1:
         # secant update of that slope, per point and axis
+        d_sel = d[sel]
         if it > 0:
-            dx = d[sel] - prev[sel, :2]
+            pv = prev[sel]
+            dx = d_sel - pv[:, :2]
             upd = np.abs(dx) > 1e-4
-            slope = (prev[sel, 2:] - f) / np.where(upd, dx, 1.0)
-            kappa[sel] = np.where(upd, np.clip(slope, 0.2, 2.0), kappa[sel])
-        prev[sel, :2] = d[sel]
-        prev[sel, 2:] = ph
+            slope = (pv[:, 2:] - f) / np.where(upd, dx, 1.0)
+            kappa[sel] = np.where(upd, np.clip(slope, _KMIN, _KMAX), kappa[sel])
+        prev[sel] = np.concatenate([d_sel, ph], axis=1)
         step = f / kappa[sel]
-        d[sel] = np.clip(d[sel] + step, -0.999, 0.999)
-        done = np.all(np.abs(step) < tol, axis=1)
+        d[sel] = np.clip(d_sel + step, -0.999, 0.999)
+        done = (np.abs(step) < tol).all(axis=1)
         converged[active[done]] = True
         active = active[~done]
 

@@ -651,14 +651,15 @@ class AttitudeModel:
             if len(set(axes)) != len(axes):
                 raise js.error("axis", f"repeated axis in {axes}")
             for k, axis in enumerate(axes):
-                sub = Section(js.data, js.path)  # re-read per axis (independent draws)
-                sub._read |= {"kind", "axis"}
+                # a fresh view of the same table per axis: independent draws, and
+                # finish() checks every key of the table
+                sub = Section(js.data, js.path)
+                sub.string("kind")
+                sub.strings("axis")
                 dist = disturbance_from_config(sub, rng=_rng(seed, _STREAM_JITTER, i, k),
                                                t_start=t_start, t_end=t_end, kind=kind)
                 sub.finish()
                 dists.append((axis, dist))
-            js._read |= set(js.data)  # validated through `sub`
-            js.finish()
         knowledge = KnowledgeConfig.from_section(section.section("knowledge"))
         star = StarTrackerConfig.from_section(section.section("star_tracker"))
         section.finish(extra_allowed)

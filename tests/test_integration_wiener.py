@@ -105,3 +105,12 @@ def test_wiener_bad_options():
         integrate(diffs, TAUS, DT, method="wiener", psd=lambda f: -np.ones_like(f))
     with pytest.raises(ValueError, match="^k"):
         integrate(diffs, TAUS, DT, method="inverse", k=0)
+
+
+def test_wiener_long_lag_many_blind_frequencies():
+    # PAN/B2-like lag: blind every 5.8 Hz; a strong line's leakage must not blow up the prior
+    tau = 0.1722
+    theta = sines([61.0, 13.0], [1.0, 0.3], [0.0, 1.0])
+    diffs, truth = make(theta, 3000, taus=[tau], sigma=0.01, seed=5)
+    est = integrate(diffs, [tau], DT, method="wiener")
+    assert np.std(err(est, truth)) < 0.02

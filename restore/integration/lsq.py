@@ -43,7 +43,7 @@ def _robust_std(x: np.ndarray) -> float:
 
 def integrate_lsq(diffs, taus, dt, *, lags=None, sigmas=None, alpha: float | None = None, beta: float | None = None,
                   noise_std: float | None = None, signal_std: float | None = None,
-                  bandwidth_hz: float | None = None) -> np.ndarray:
+                  bandwidth_hz: float | None = None, gcv: bool = True) -> np.ndarray:
     """Integrate differentials by regularised least squares in the time domain.
 
     Parameters
@@ -68,6 +68,9 @@ def integrate_lsq(diffs, taus, dt, *, lags=None, sigmas=None, alpha: float | Non
     bandwidth_hz : float, optional
         Typical highest frequency of θ, for the default β; estimated from the
         differentials' spectra when omitted.
+    gcv : bool
+        Refine the curvature weight by generalised cross-validation
+        (multipliers 0.3–30 of the default; tr(H) by a Hutchinson estimator).
 
     Returns
     -------
@@ -137,21 +140,53 @@ def integrate_lsq(diffs, taus, dt, *, lags=None, sigmas=None, alpha: float | Non
     w = np.concatenate(wts)
     wn = w / np.median(w)  # relative weights: median equation has weight 1
     sigma_d = float(np.median(noise_levels)) if noise_std is None else float(noise_std)
-    if signal_std is None:
-        dv = np.concatenate([d[np.isfinite(d)] for d in diffs])
-        signal_std = max(np.sqrt(max(np.var(dv) - sigma_d ** 2, 0.0) / 2.0), sigma_d)
-    if alpha is None:
-        alpha = (sigma_d / float(signal_std)) ** 2
-    if beta is None:
-        if bandwidth_hz is None:
-            bandwidth_hz = _bandwidth_hz(diffs, dt)
-        # curvature of a band-limited signal: |Δ²θ| ≈ (2π f dt)² |θ|
-        curv = (2 * np.pi * bandwidth_hz * dt) ** 2 * float(signal_std)
-        beta = (sigma_d / max(curv, 1e-30)) ** 2
+    dv = np.concatenate([d[np.isfinite(d)] for d in diffs])
+    if bandwidth_hz is None and beta is None:
+        bandwidth_hz = _bandwidth_hz(diffs, dt)
     D2 = sp.diags([np.ones(n - 2), -2 * np.ones(n - 2), np.ones(n - 2)], [0, 1, 2], shape=(n - 2, n))
-    N = (A.T @ sp.diags(wn) @ A) + alpha * sp.identity(n) + beta * (D2.T @ D2)
+    AtWA = (A.T @ sp.diags(wn) @ A).tocsc()
+    DtD = (D2.T @ D2).tocsc()
+    eye = sp.identity(n, format="csc")
     y = A.T @ (wn * b)
-    theta = spla.spsolve(N.tocsc(), y)
+    # empirical Bayes: the formal noise level of the differentials is re-scaled by the
+    # post-fit residuals (matching errors are larger than their formal σ), then the
+    # prior weights are recomputed and the system solved again
+    passes = 1 if (noise_std is not None or (alpha is not None and beta is not None)) else 3
+    for _ in range(passes):
+        sig_t = float(signal_std) if signal_std is not None else \
+            max(np.sqrt(max(np.var(dv) - sigma_d ** 2, 0.0) / 2.0), sigma_d)
+        a = alpha if alpha is not None else (sigma_d / sig_t) ** 2
+        if beta is None:
+            # curvature of a band-limited signal: |Δ²θ| ≈ (2π f dt)² |θ|
+            curv = (2 * np.pi * bandwidth_hz * dt) ** 2 * sig_t
+            bt = (sigma_d / max(curv, 1e-30)) ** 2
+        else:
+            bt = beta
+        theta = spla.spsolve((AtWA + a * eye + bt * DtD).tocsc(), y)
+        r = A @ theta - b
+        m_eq = r.size
+        dof = max(m_eq - n, m_eq // 4)  # the fit absorbs about one equation per unknown
+        new = float(np.sqrt(np.sum(wn * r ** 2) / dof))
+        if not np.isfinite(new) or new <= 0:
+            break
+        sigma_d = new
+    if gcv:
+        # generalised cross-validation over a multiplier of the curvature weight
+        rng = np.random.default_rng(0)
+        probes = rng.choice([-1.0, 1.0], size=(3, r0))
+        best = None
+        sw = np.sqrt(wn)
+        for kappa in (0.3, 1.0, 3.0, 10.0, 30.0):
+            M = (AtWA + a * eye + kappa * bt * DtD).tocsc()
+            lu = spla.splu(M)
+            th = lu.solve(y)
+            res = sw * (A @ th - b)
+            # tr(H) with H = W^1/2 A M^-1 A^T W^1/2, Hutchinson estimator
+            tr = np.mean([z @ (sw * (A @ lu.solve(A.T @ (sw * z)))) for z in probes])
+            g = r0 * float(res @ res) / max(r0 - tr, 1.0) ** 2
+            if best is None or g < best[0]:
+                best = (g, th, kappa)
+        theta = best[1]
     # where no equation constrains θ (beyond the reach of every pair) there is no estimate
     reach = np.asarray(abs(A).sum(axis=0)).ravel() > 0
     covered = _dilate_coverage(reach, n)

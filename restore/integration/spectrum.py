@@ -188,9 +188,13 @@ def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=No
         Lower bound of the noise standard deviation relative to the
         differentials' standard deviation (keeps noise-free data well posed).
     min_gain : float
-        Where ``sum_j |G_j|²`` (noise-weighted) is below this, i.e. near the
-        blind frequencies and 0 Hz, the PSD is interpolated linearly from the
-        nearest well-observed frequencies instead of divided by ~0.
+        Where ``sum_j |G_j|²`` (noise-weighted) is below this fraction of its
+        maximum over the neighbouring ``2 detection_hz + dilate_hz``, i.e. in
+        the notches at the blind frequencies ``n / tau`` (``n >= 1``; not the
+        low-frequency end), the PSD is interpolated linearly from the nearest
+        well-observed frequencies
+        instead of being divided by ~0 (a strong line's leakage would
+        otherwise make it explode there).
 
     Returns
     -------
@@ -240,7 +244,8 @@ def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=No
     # Near blind frequencies (and 0 Hz) the ratio (P - nu) / |G|² is meaningless (leakage
     # and noise divided by ~0): bridge those bins linearly from well-observed neighbours.
     info = (g2 * (nu.min() / nu)[:, None]).sum(0)
-    poor = info < min_gain
+    Lw = max(1, int(round((2 * detection_hz + dilate_hz) / df))) | 1
+    poor = (info < min_gain * maximum_filter1d(info, Lw)) & (f >= 0.5 / taus.max())
     if poor.any() and (~poor).any():
         good = np.flatnonzero(~poor)
         S[poor] = np.interp(np.flatnonzero(poor), good, S[good], left=0.0, right=0.0)

@@ -30,7 +30,7 @@ import math
 import numpy as np
 from scipy.fft import irfft, next_fast_len, rfft
 
-from ._common import check_positive, per_pair, prepare
+from ._common import check_positive, prepare
 from .gaps import estimable_mask
 from .spectrum import SpectralEstimate, estimate_spectrum
 
