@@ -68,7 +68,16 @@ def correct_bands(product, *, restored, valid=None, column_step: int = 16):
 def per_line_shift_rms(lines, res_l, res_c, n_lines: int, *, min_points: int = 5) -> dict:
     """RMS over lines of the per-line mean residual (line and column), in px."""
     lines = np.asarray(lines, dtype=np.int64)
+    res_l = np.asarray(res_l, dtype=np.float64)
+    res_c = np.asarray(res_c, dtype=np.float64)
     ok = np.isfinite(res_l) & np.isfinite(res_c)
+    # mismatches are not misregistration: reject points beyond 3 robust σ of the residuals
+    # around their line's median (the same rule as the instant synthesis)
+    for r in (res_l, res_c):
+        med = _line_median(lines, r, ok, n_lines)
+        dev = r - med[np.clip(lines, 0, n_lines - 1)]
+        s = 1.4826 * np.nanmedian(np.abs(dev[ok])) if ok.any() else np.nan
+        ok &= np.abs(dev) <= 3 * max(s, 1e-3)
     lines, res_l, res_c = lines[ok], res_l[ok], res_c[ok]
     n = np.bincount(lines, minlength=n_lines)
     sl = np.bincount(lines, res_l, minlength=n_lines)
@@ -80,8 +89,33 @@ def per_line_shift_rms(lines, res_l, res_c, n_lines: int, *, min_points: int = 5
     mc = sc[m] / n[m]
     ml = ml - ml.mean()
     mc = mc - mc.mean()
+    # matching noise left in a per-line mean: within-line scatter / sqrt(n)
+    sl2 = np.bincount(lines, res_l ** 2, minlength=n_lines)
+    sc2 = np.bincount(lines, res_c ** 2, minlength=n_lines)
+    var_l = (sl2[m] / n[m] - (sl[m] / n[m]) ** 2) / np.maximum(n[m] - 1, 1)
+    var_c = (sc2[m] / n[m] - (sc[m] / n[m]) ** 2) / np.maximum(n[m] - 1, 1)
+    noise = float(np.sqrt(np.mean(np.clip(var_l, 0, None) + np.clip(var_c, 0, None))))
+    total = float(np.sqrt(np.mean(ml ** 2 + mc ** 2)))
     return {"line_px": float(np.sqrt(np.mean(ml ** 2))), "col_px": float(np.sqrt(np.mean(mc ** 2))),
-            "total_px": float(np.sqrt(np.mean(ml ** 2 + mc ** 2))), "lines": int(m.sum())}
+            "total_px": total, "noise_px": noise, "net_px": float(np.sqrt(max(total ** 2 - noise ** 2, 0.0))),
+            "lines": int(m.sum())}
+
+
+def _line_median(lines, values, ok, n_lines):
+    """Median of ``values`` per line (NaN where a line has no value)."""
+    med = np.full(n_lines, np.nan)
+    li = lines[ok]
+    v = values[ok]
+    if li.size == 0:
+        return med
+    order = np.lexsort((v, li))
+    li, v = li[order], v[order]
+    starts = np.flatnonzero(np.r_[True, li[1:] != li[:-1]])
+    ends = np.r_[starts[1:], li.size]
+    mid_lo = v[(starts + ends - 1) // 2]
+    mid_hi = v[(starts + ends) // 2]
+    med[li[starts]] = 0.5 * (mid_lo + mid_hi)
+    return med
 
 
 def misregistration(product, corrected, pairs, settings) -> dict:
@@ -115,6 +149,7 @@ def misregistration(product, corrected, pairs, settings) -> dict:
         after = per_line_shift_rms(np.rint(la[ok][good]), m.line_b[good] - pl[ok][good], m.col_b[good] - pc[ok][good],
                                    n_lines)
         out[p.name] = {"before_px": before["total_px"], "after_px": after["total_px"],
+                       "after_noise_px": after["noise_px"], "after_net_px": after["net_px"],
                        "before_line_px": before["line_px"], "before_col_px": before["col_px"],
                        "after_line_px": after["line_px"], "after_col_px": after["col_px"], "lines": after["lines"]}
     return out

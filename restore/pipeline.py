@@ -54,7 +54,7 @@ class RestorationSettings:
     axes: tuple = ("roll", "pitch")
     n_sigma: float = 3.0
     min_points_per_line: int = 3
-    highpass_hz: float = 8.0
+    highpass_hz: float = 2.0
     max_gap_fill_lines: int = 8
     compensate_window: bool = True
     method: str | None = None
@@ -170,7 +170,8 @@ class RestorationResult:
         if self.misregistration:
             for k, v in self.misregistration.items():
                 lines.append(f"  misregistration {k}: before {v['before_px']:.3f} px, after {v['after_px']:.3f} px "
-                             "(RMS of per-line shifts)")
+                             f"(RMS of per-line shifts; of which matching noise {v['after_noise_px']:.3f} px, "
+                             f"net {v['after_net_px']:.3f} px)")
         t = self.timings
         lines.append(f"  time: {t.get('total_s', 0):.1f} s ({t.get('lines_per_s', 0):.0f} lines/s, "
                      f"{t.get('matches_per_s', 0):.0f} matches/s)")
@@ -417,7 +418,7 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
         kr, kp, ky = kn.at(t_line)
         knowledge = {"roll": kr, "pitch": kp, "yaw": ky}
         estimate = {a: np.zeros(n_lines) for a in AXES}
-        method = settings.method or "lsq"
+        method = settings.method or DEFAULT_METHOD
         t_syn = t_int = 0.0
         valid_est = {a: np.ones(n_lines, dtype=bool) for a in AXES}
         for it in range(settings.iterations):

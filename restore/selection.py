@@ -224,18 +224,46 @@ def texture_mask(image, *, window=(3, 31), noise_std=None, max_std=0.1, min_cont
     return ok
 
 
-def double_gradient_points(image, *, threshold=None, n_sigma=5.0, noise_std=None, min_distance=8,
-                           mask=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _hessian_score(img: np.ndarray, sigma: float) -> np.ndarray:
+    """Smaller absolute eigenvalue of the Hessian (second differences, 4 directions)."""
+    if sigma > 0:
+        img = ndimage.gaussian_filter(img, sigma, mode="nearest")
+    p = np.pad(img, 1, mode="edge")
+    c = p[1:-1, 1:-1]
+    d_ll = p[2:, 1:-1] - 2 * c + p[:-2, 1:-1]                # along lines
+    d_cc = p[1:-1, 2:] - 2 * c + p[1:-1, :-2]                # along columns
+    d_1 = 0.5 * (p[2:, 2:] - 2 * c + p[:-2, :-2])            # diagonals: distance sqrt(2)
+    d_2 = 0.5 * (p[2:, :-2] - 2 * c + p[:-2, 2:])
+    h_lc = 0.5 * (d_1 - d_2)                                 # mixed derivative
+    mean = 0.5 * (d_ll + d_cc)
+    rad = np.hypot(0.5 * (d_ll - d_cc), h_lc)
+    return np.minimum(np.abs(mean + rad), np.abs(mean - rad))
+
+
+def _second_difference_gain(sigma: float) -> float:
+    """White-noise gain of the (smoothed) second difference along one axis."""
+    size = 2 * int(np.ceil(4 * sigma)) + 5
+    delta = np.zeros((size, size))
+    delta[size // 2, size // 2] = 1.0
+    if sigma > 0:
+        delta = ndimage.gaussian_filter(delta, sigma, mode="constant")
+    d2 = delta[2:, 1:-1] - 2 * delta[1:-1, 1:-1] + delta[:-2, 1:-1]
+    return float(np.sqrt(np.sum(d2 * d2)))
+
+
+def double_gradient_points(image, *, threshold=None, n_sigma=4.0, noise_std=None, sigma=1.5,
+                           min_distance=8, mask=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Points whose second derivative exceeds a threshold in two directions.
 
     The patent's "doble gradiente": the second derivative with respect to
-    distance, taken along lines, columns and both diagonals, gives the Hessian
-    at each pixel; the second derivative exceeds the threshold in two
-    orthogonal directions when both eigenvalues of the Hessian do. The score
-    is the smaller absolute eigenvalue: high on spots, corners and saddles,
-    zero on straight edges and ridges (which cannot be matched along them).
-    Points are kept where the score reaches the threshold and is a local
-    maximum along their line within ``min_distance`` columns.
+    distance, taken along lines, columns and both diagonals (after a light
+    Gaussian smoothing), gives the Hessian at each pixel; the second
+    derivative exceeds the threshold in two orthogonal directions when both
+    eigenvalues of the Hessian do. The score is the smaller absolute
+    eigenvalue: high on spots, corners and saddles, zero on straight edges
+    and ridges (which cannot be matched along them). Points are kept where
+    the score reaches the threshold and is a local maximum along their line
+    within ``min_distance`` columns.
 
     Parameters
     ----------
@@ -243,12 +271,16 @@ def double_gradient_points(image, *, threshold=None, n_sigma=5.0, noise_std=None
         Band A.
     threshold : float or None, keyword-only
         Threshold on the second derivative (image unit / px**2). None:
-        ``n_sigma`` times the noise standard deviation of a second
-        difference, ``sqrt(6) * noise_std``.
+        ``n_sigma`` times the noise standard deviation of the (smoothed)
+        second difference.
     n_sigma : float, keyword-only
         Threshold in noise standard deviations when ``threshold`` is None.
     noise_std : float or None, keyword-only
         Noise standard deviation (image unit); estimated when None.
+    sigma : float, keyword-only
+        Standard deviation of the Gaussian smoothing (px); 0 disables it.
+        Smoothing raises the signal-to-noise ratio of second derivatives on
+        images whose MTF leaves little energy near Nyquist.
     min_distance : int, keyword-only
         Non-maximum suppression half-width along the line (px).
     mask : ndarray of bool or None, keyword-only
@@ -264,26 +296,21 @@ def double_gradient_points(image, *, threshold=None, n_sigma=5.0, noise_std=None
     img = _as_image(image)
     if int(min_distance) != min_distance or min_distance < 0:
         raise ValueError(f"min_distance: must be an integer >= 0, got {min_distance}")
+    if not sigma >= 0:
+        raise ValueError(f"sigma: must be >= 0, got {sigma}")
     if threshold is None:
         if not n_sigma > 0:
             raise ValueError(f"n_sigma: must be > 0, got {n_sigma}")
-        sigma = estimate_noise(img) if noise_std is None else float(noise_std)
-        if not sigma >= 0:
+        noise = estimate_noise(img) if noise_std is None else float(noise_std)
+        if not noise >= 0:
             raise ValueError(f"noise_std: must be >= 0, got {noise_std}")
-        threshold = n_sigma * np.sqrt(6.0) * sigma
+        threshold = n_sigma * _second_difference_gain(sigma) * noise
     elif not threshold >= 0:
         raise ValueError(f"threshold: must be >= 0, got {threshold}")
-    p = np.pad(np.where(np.isfinite(img), img, np.nan), 1, mode="edge")
-    c = p[1:-1, 1:-1]
-    d_ll = p[2:, 1:-1] - 2 * c + p[:-2, 1:-1]                # along lines
-    d_cc = p[1:-1, 2:] - 2 * c + p[1:-1, :-2]                # along columns
-    d_1 = 0.5 * (p[2:, 2:] - 2 * c + p[:-2, :-2])            # diagonals: distance sqrt(2)
-    d_2 = 0.5 * (p[2:, :-2] - 2 * c + p[:-2, 2:])
-    h_lc = 0.5 * (d_1 - d_2)                                 # mixed derivative
-    mean = 0.5 * (d_ll + d_cc)
-    rad = np.hypot(0.5 * (d_ll - d_cc), h_lc)
-    score = np.minimum(np.abs(mean + rad), np.abs(mean - rad))
-    score = np.where(np.isfinite(score), score, -np.inf)
+    nodata = ~np.isfinite(img)
+    score = _hessian_score(np.where(nodata, 0.0, img), sigma)
+    if nodata.any():
+        score[_dilate(nodata, (2 * int(np.ceil(3 * sigma)) + 3,) * 2)] = -np.inf
     keep = score >= threshold
     if min_distance > 0:
         keep &= score >= ndimage.maximum_filter1d(score, 2 * int(min_distance) + 1, axis=1, mode="nearest")
@@ -452,6 +479,8 @@ def select_points(image, *, method="grid", per_line=20, window=(3, 31), search=(
     if n_lines <= 2 * ml or n_cols <= 2 * mc:
         return empty
 
+    if noise_std is None:
+        noise_std = estimate_noise(img)
     usable = texture_mask(img, window=window, noise_std=noise_std, max_std=max_std, min_contrast=min_contrast,
                           saturation=saturation, max_level=max_level)
     if mask is not None:
