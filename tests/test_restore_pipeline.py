@@ -1,0 +1,108 @@
+"""Restoration end to end on the `tiny` scenario, robustness and error messages."""
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from restore.pipeline import RestorationError, restore_product, restore_run, restoration_settings
+from reports.metrics import attitude_errors
+from simsat.config import ScenarioError
+from simsat.product import read_product, read_truth
+from simsat.scenario import load_scenario
+from simsat.simulate import simulate
+
+
+@pytest.fixture(scope="module")
+def tiny_restored(tmp_path_factory):
+    d = tmp_path_factory.mktemp("restore") / "tiny"
+    simulate("tiny", d, progress=False)
+    # restoration must work without truth: hide it while restoring
+    hidden = d.parent / "truth_hidden.nc"
+    shutil.move(d / "truth.nc", hidden)
+    res = restore_run(d, progress=False)
+    shutil.move(hidden, d / "truth.nc")
+    return d, res
+
+
+def test_restoration_file_has_the_documented_content(tiny_restored):
+    d, res = tiny_restored
+    ds = xr.load_dataset(d / "restoration.nc")
+    for a in ("roll", "pitch", "yaw"):
+        assert ds[a].attrs["units"] == "rad"
+    assert ds["time"].attrs["units"] == "s"
+    assert ds.attrs["pixel_ifov_rad"] == pytest.approx(52e-6 / 12.905)
+    assert set(ds["pair"].values) == {"B1/B0", "B0/B2", "B1/B2"}
+    assert ds["diff_roll"].dims == ("pair", "time")
+    assert ds.sizes["match"] > 1000
+    assert 0.8 < ds.attrs["coverage_roll"] <= 1.0
+    assert (d / "corrected.nc").exists()
+
+
+def test_restoration_beats_the_knowledge_on_roll_and_pitch(tiny_restored):
+    d, res = tiny_restored
+    errs = attitude_errors(xr.load_dataset(d / "restoration.nc"), read_truth(d))
+    for a in ("roll", "pitch"):
+        assert errs[a]["rms_px"] < 0.4 * errs[a]["knowledge_rms_px"], errs[a]
+
+
+def test_no_nan_leaks_into_estimated_lines(tiny_restored):
+    d, _ = tiny_restored
+    ds = xr.load_dataset(d / "restoration.nc")
+    for a in ("roll", "pitch"):
+        v = ds[a].values
+        m = np.isfinite(v)
+        # estimated lines form one block (no isolated NaN inside)
+        idx = np.flatnonzero(m)
+        assert idx[-1] - idx[0] + 1 == idx.size
+
+
+def test_misregistration_drops_after_correction(tiny_restored):
+    _, res = tiny_restored
+    for name, v in res.misregistration.items():
+        assert v["after_px"] < 0.5 * v["before_px"], (name, v)
+
+
+def test_flat_product_ends_with_a_clear_message(tiny_restored, tmp_path):
+    d, _ = tiny_restored
+    ds = xr.load_dataset(d / "product.nc")
+    rng = np.random.default_rng(0)
+    for k in [v for v in ds.data_vars if v.startswith("image_")]:
+        ds[k].values[:] = (500 + rng.normal(0, 3, ds[k].shape)).astype(np.uint16)
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    ds.to_netcdf(flat / "product.nc")
+    with pytest.raises(RestorationError, match="no usable texture"):
+        restore_run(flat, progress=False)
+    p = subprocess.run([sys.executable, "-m", "simsat.cli", "restore", str(flat), "--quiet"], capture_output=True,
+                       text=True)
+    assert p.returncode == 2
+    assert "Traceback" not in p.stderr and "no usable texture" in p.stderr
+    assert not (flat / "restoration.nc").exists()
+
+
+def test_missing_product_and_bad_settings_are_named(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "simsat.cli", "restore", str(tmp_path), "--quiet"], capture_output=True,
+                       text=True)
+    assert p.returncode == 2 and "product.nc" in p.stderr and "Traceback" not in p.stderr
+    with pytest.raises(ScenarioError, match="restoration.window_lines: must be odd"):
+        restoration_settings({"window_lines": 4})
+    with pytest.raises(ScenarioError, match="restoration.methd: unknown key"):
+        restoration_settings({"methd": "wiener"})
+
+
+@pytest.mark.slow
+def test_half_the_scene_under_clouds_still_restores_with_gaps_flagged(tmp_path):
+    sc = load_scenario("tiny", overrides={"scene": {"texture": {"cloud_fraction": 0.5}},
+                                          "acquisition": {"lines": 768}})
+    d = tmp_path / "cloudy"
+    simulate(sc, d, progress=False)
+    res = restore_run(d, progress=False)
+    ds = xr.load_dataset(d / "restoration.nc")
+    v = ds["roll"].values
+    assert 0.2 < res.coverage["roll"] <= 1.0
+    errs = attitude_errors(ds, read_truth(d))
+    assert errs["roll"]["rms_px"] < errs["roll"]["knowledge_rms_px"]
