@@ -49,7 +49,10 @@ def _render_measure(scenario: str, lines: int | None, full: bool) -> dict:
         "render_wall_s": st.wall_s, "rays_per_s": st.rays_per_s, "ray_intersect_ceiling_rays_per_s": ceiling,
         "ratio_to_ceiling": st.rays_per_s / ceiling,
         "breakdown_s": {"ray_generation": st.raygen_s, "ray_intersect": st.intersect_s,
-                        "texture_strip": st.texture_s, "texture_lookup_and_transfer": st.shade_s},
+                        "texture_strip": st.texture_s, "texture_lookup_and_transfer": st.shade_s,
+                        "of_which_texture_synthesis": st.texture_synthesis_s, "of_which_prefilter": st.prefilter_s},
+        "ray_path_rays_per_s": st.rays / max(st.raygen_s + st.intersect_s + st.shade_s, 1e-9),
+        "ray_path_ratio_to_ceiling": st.rays / max(st.raygen_s + st.intersect_s + st.shade_s, 1e-9) / ceiling,
         "world_build_s": t_world, "scene_build_s": t_scene, "peak_rss_gb": _peak_rss_gb(),
         "cpu_count": os.cpu_count(),
     }
@@ -164,7 +167,13 @@ def format_result(what: str, result: dict) -> str:
             lines.append(f"{m['scenario']}: {m['lines']} lines x {m['pixels']} px x {m['bands']} bands, {m['variant']}")
             lines.append(f"  rendered   {m['rays_per_s'] / 1e6:8.2f} Mrays/s  ({m['rays']:,} rays in {m['render_wall_s']:.1f} s)")
             lines.append(f"  ceiling    {m['ray_intersect_ceiling_rays_per_s'] / 1e6:8.2f} Mrays/s  (raw scene.ray_intersect)")
-            lines.append(f"  ratio      {m['ratio_to_ceiling'] * 100:8.1f} %")
+            lines.append(f"  ratio      {m['ratio_to_ceiling'] * 100:8.1f} %   (whole render loop, texture synthesis included)")
+            lines.append(f"  ray path   {m['ray_path_rays_per_s'] / 1e6:8.2f} Mrays/s = {m['ray_path_ratio_to_ceiling'] * 100:.1f} % of the "
+                         "ceiling (ray generation + intersection + texture lookup)")
+            b = m["breakdown_s"]
+            lines.append(f"  time split: rays {b['ray_generation']:.1f} s, intersect {b['ray_intersect']:.1f} s, lookup "
+                         f"{b['texture_lookup_and_transfer']:.1f} s, texture synthesis {b['of_which_texture_synthesis']:.1f} s, "
+                         f"prefilter {b['of_which_prefilter']:.1f} s")
             lines.append(f"  peak RSS   {m['peak_rss_gb']:8.2f} GB")
             if "extrapolated_full_render_s" in m:
                 lines.append(f"  full {m['full_lines']} lines: extrapolated render {m['extrapolated_full_render_s']:.0f} s "

@@ -170,18 +170,37 @@ class PushbroomRenderer:
         return ground_prefilter_kernel(box_texels=box_m / te, psf_sigma_texels=psf_sigma_m / te)
 
     def _tile(self, k: int) -> np.ndarray:
-        """Reflectance × irradiance of along-track tile ``k`` (all bands), cached."""
+        """Prefiltered reflectance × irradiance of along-track tile ``k`` (all bands), cached.
+
+        The tile is synthesised with a margin of the prefilter's half-width on
+        every side, filtered, and cropped: since the texture is a function of
+        absolute ground coordinates, the mosaic of tiles equals the prefiltered
+        texture of the whole scene, and every texel is synthesised and filtered
+        once.
+        """
         if k in self._tiles:
             return self._tiles[k]
         te = self.texel_m
-        x0 = k * self._tile_nx * te
+        pad = len(self._kernel) // 2 + 1
+        x0 = k * self._tile_nx * te - pad * te
+        y0 = self._tile_y0 - pad * te
+        nx = self._tile_nx + 2 * pad
+        ny = self._tile_ny + 2 * pad
         t0 = _time.perf_counter()
-        tex = np.asarray(self.texture.grid(x0, self._tile_y0, te, self._tile_nx, self._tile_ny), dtype=np.float32)
+        tex = np.asarray(self.texture.grid(x0, y0, te, nx, ny), dtype=np.float32)
         if self.irradiance is not None:
-            xs = x0 + (np.arange(self._tile_nx) + 0.5) * te
-            ys = self._tile_y0 + (np.arange(self._tile_ny) + 0.5) * te
+            xs = x0 + (np.arange(nx) + 0.5) * te
+            ys = y0 + (np.arange(ny) + 0.5) * te
             tex = tex * _bilinear_grid(self.irradiance, xs, ys).astype(np.float32)[None]
         self.stats.texture_synthesis_s += _time.perf_counter() - t0
+        t0 = _time.perf_counter()
+        if len(self._kernel) > 1:
+            import cv2
+            kk = self._kernel.astype(np.float32)
+            tex = np.stack([cv2.sepFilter2D(np.ascontiguousarray(b), cv2.CV_32F, kk, kk,
+                                            borderType=cv2.BORDER_REPLICATE) for b in tex])
+        tex = np.ascontiguousarray(tex[:, pad:pad + self._tile_ny, pad:pad + self._tile_nx])
+        self.stats.prefilter_s += _time.perf_counter() - t0
         # keep only tiles that later blocks may need (the push-broom moves forward)
         for old in [j for j in self._tiles if j < k - 2]:
             del self._tiles[old]
@@ -191,30 +210,18 @@ class PushbroomRenderer:
     def _texture_strip(self, x_min: float, x_max: float):
         """Prefiltered texture (nbands, ny, nx) covering [x_min, x_max] and its origin (x0, y0) [m]."""
         te = self.texel_m
-        pad = len(self._kernel) // 2 + 2
-        k0 = int(np.floor((x_min - pad * te) / (self._tile_nx * te)))
-        k1 = int(np.floor((x_max + pad * te) / (self._tile_nx * te)))
-        tex = np.concatenate([self._tile(k) for k in range(k0, k1 + 1)], axis=2)
+        k0 = int(np.floor((x_min - 2 * te) / (self._tile_nx * te)))
+        k1 = int(np.floor((x_max + 2 * te) / (self._tile_nx * te)))
+        tex = np.concatenate([self._tile(k) for k in range(k0, k1 + 1)], axis=2) if k1 > k0 else self._tile(k0)
         x0 = k0 * self._tile_nx * te
-        # crop to what is needed (+ padding for the prefilter)
-        i0 = max(int(np.floor((x_min - x0) / te)) - pad, 0)
-        i1 = min(int(np.ceil((x_max - x0) / te)) + pad + 1, tex.shape[2])
-        tex = tex[:, :, i0:i1]
-        x0 = x0 + i0 * te
-        t0 = _time.perf_counter()
-        if len(self._kernel) > 1:
-            import cv2
-            kk = self._kernel.astype(np.float32)
-            tex = np.stack([cv2.sepFilter2D(np.ascontiguousarray(b), cv2.CV_32F, kk, kk,
-                                            borderType=cv2.BORDER_REPLICATE) for b in tex])
-        self.stats.prefilter_s += _time.perf_counter() - t0
-        return tex, x0, self._tile_y0
+        i0 = max(int(np.floor((x_min - x0) / te)) - 2, 0)
+        i1 = min(int(np.ceil((x_max - x0) / te)) + 3, tex.shape[2])
+        return tex[:, :, i0:i1], x0 + i0 * te, self._tile_y0
 
     def _setup_tiles(self, y_min: float, y_max: float):
         te = self.texel_m
-        pad = len(self._kernel) // 2 + 2
-        self._tile_y0 = float(np.floor(y_min / te) - pad) * te
-        self._tile_ny = int(np.ceil((y_max - self._tile_y0) / te)) + pad + 1
+        self._tile_y0 = float(np.floor(y_min / te)) * te
+        self._tile_ny = int(np.ceil((y_max - self._tile_y0) / te)) + 1
         self._tile_nx = max(64, int(round(256.0 / te)))
 
     # -- rendering ---------------------------------------------------------------
@@ -307,6 +314,8 @@ class PushbroomRenderer:
                 ys.append(self.platform.y_m + (self.platform.altitude_m - self.dem.z_min) * np.tan(ang))
         margin = 100.0
         self._setup_tiles(min(ys) - margin, max(ys) + margin)
+        along = [d.along_m for d in self.instrument.detectors]
+        self._band_spread_m = (max(along) - min(along)) / f * self.platform.altitude_m
 
     def _strip_cache(self, x_min: float, x_max: float):
         """The prefiltered strip for the current block, shared by every detector of the block."""
@@ -314,8 +323,8 @@ class PushbroomRenderer:
         if st is not None and st[1] <= x_min and x_max <= st[2]:
             return st[0]
         # one strip per block covering all detectors (bands are a few hundred metres apart)
-        lo = x_min - 400.0
-        hi = x_max + 400.0
+        lo = x_min - self._band_spread_m - 20.0
+        hi = x_max + self._band_spread_m + 20.0
         t0 = _time.perf_counter()
         strip = self._texture_strip(lo, hi)
         self.stats.texture_strip_s += _time.perf_counter() - t0
