@@ -103,8 +103,7 @@ def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | 
     from .metrics import attitude_errors
 
     sc = load_scenario(scenario, overrides={"acquisition": {"lines": lines}} if lines else None)
-    rd = Path(run_dir) if run_dir else Path("runs") / f"bench_{sc.name}" + (f"_{lines}" if lines else "")
-    rd = Path(str(rd))
+    rd = Path(run_dir) if run_dir else Path("runs") / (f"bench_{sc.name}" + (f"_{lines}" if lines else ""))
     t0 = _time.perf_counter()
     simulate(sc, rd, progress=False)
     t_render = _time.perf_counter() - t0

@@ -63,7 +63,8 @@ def _evaluate(f, phase, amp, lines, cols):
 
 
 def synthetic_pairs(*, seed=0, n=2000, window=(3, 31), search=(2, 2), max_shift=1.5, case="same",
-                    noise=0.02, n_terms=64, mtf_nyquist=0.3, corner=0.02, band_correlation=0.85):
+                    noise=0.02, n_terms=64, mtf_nyquist=0.3, corner=0.02, band_correlation=0.85,
+                    dtype=np.float32):
     """Pairs of analytic band-limited patches with known sub-pixel shifts.
 
     Parameters
@@ -88,6 +89,8 @@ def synthetic_pairs(*, seed=0, n=2000, window=(3, 31), search=(2, 2), max_shift=
         Corner frequency of the ``1/f`` amplitude spectrum (cycles/px).
     band_correlation : float, keyword-only
         Cross-band case: correlation of the two mixes (0..1).
+    dtype : numpy dtype, keyword-only
+        Type of the images (products store float32 bands).
 
     Returns
     -------
@@ -139,7 +142,7 @@ def synthetic_pairs(*, seed=0, n=2000, window=(3, 31), search=(2, 2), max_shift=
     lines = ml + pl * np.arange(n, dtype=float)
     cols = np.full(n, float(mc))
     return {
-        "image_a": img_a.reshape(n * pl, pc), "image_b": img_b.reshape(n * pl, pc),
+        "image_a": img_a.reshape(n * pl, pc).astype(dtype), "image_b": img_b.reshape(n * pl, pc).astype(dtype),
         "lines": lines, "cols": cols, "shift_lines": shift[:, 0], "shift_cols": shift[:, 1],
         "patch_shape": (pl, pc),
     }

@@ -419,9 +419,10 @@ def match_points(
     max_iter : int, keyword-only
         Maximum number of sub-pixel iterations.
     tol : float, keyword-only
-        A point stops once its update is below ``tol`` (px). The last update
-        is applied and the secant steps converge superlinearly, so the error
-        left is typically ten times smaller.
+        A point stops once its update is below ``tol`` (px), or below a tenth
+        of its own estimated standard deviation. The last update is applied
+        and the secant steps converge superlinearly, so the error left is
+        typically ten times smaller.
 
     Returns
     -------
@@ -509,9 +510,9 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
         a_ref = np.where(no_data, 0.0, a_ref)
         b_ref = np.where(no_data, 0.0, b_ref)
     # remove a per-point level, then work in single precision
-    a_patch = a_patch.astype(_F32)
+    a_patch = a_patch.astype(_F32, copy=False)  # gathered copies: ours to modify
     a_patch -= a_ref.astype(_F32)[:, None, None]
-    b_big = b_big.astype(_F32)
+    b_big = b_big.astype(_F32, copy=False)
     b_big -= b_ref.astype(_F32)[:, None, None]
     a_win = a_patch[:, g:g + h, g:g + w]
     a_z = a_win - a_win.mean(axis=(1, 2), keepdims=True)
@@ -569,6 +570,7 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
         grids = _phase_grids(h, w)
     lk = np.concatenate([ninv[:, 1:, :], normal[:, None, :, 0]], axis=1)  # (N, 3, 3) step operator
     inv_a2 = 1.0 / np.where(a_norm2 > 0, a_norm2, 1.0)
+    ninv_d = np.stack([ninv[:, 1, 1], ninv[:, 2, 2]], axis=1)
     active = np.flatnonzero(~converged)
     for it in range(max_iter + 1):
         if active.size == 0:
@@ -639,7 +641,13 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
                 pvm[:, :2] -= move[mv]
                 prev[tgt] = pvm
         d[sel] = np.clip(d_new, -0.999, 0.999)
-        done = (np.abs(step) < tol).all(axis=1)
+        # converged: the step is below tol, or immaterial (a tenth of the
+        # point's own standard deviation, e.g. across bands)
+        gain_n = c[:, 0] * inv_a2[sel]
+        sig2 = np.maximum(sb - c[:, 0] * gain_n, 0.0) / max(npx - 4, 1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            noise_step = 0.1 * np.sqrt(sig2[:, None] * ninv_d[sel]) / np.abs(gain_n)[:, None]
+        done = (np.abs(step) < np.maximum(tol, np.nan_to_num(noise_step))).all(axis=1)
         converged[active[done]] = True
         active = active[~done]
 

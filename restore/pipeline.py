@@ -99,7 +99,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     m = sec.raw("method", None)
     if m is not None:
         from .integration import METHODS
-        allowed = sorted(set(METHODS) | {"lsq"})
+        allowed = sorted(METHODS)
         if not isinstance(m, str) or m not in allowed:
             raise sec.error("method", f"must be one of {', '.join(allowed)}; got {m!r}")
     s.method = m

@@ -25,6 +25,8 @@ name           principle                                         function
 ``kalman``     Kalman filter + RTS smoother (oscillators +       :func:`.kalman.integrate_kalman`
                delay line)
 ``polynomial`` weighted least squares on a polynomial            :func:`.polynomial.integrate_polynomial`
+``lsq``        time-domain regularised least squares, per-sample  :func:`.lsq.integrate_lsq`
+               lags (time synchronisation), GCV-tuned prior
 =============  ===============================================  =====================================
 
 ``DEFAULT_METHOD`` is the most accurate for quasi-harmonic jitter (see
@@ -69,6 +71,7 @@ METHODS: dict[str, Callable] = {
     "harmonic": _lazy("harmonic", "integrate_harmonic"),
     "kalman": _lazy("kalman", "integrate_kalman"),
     "polynomial": _lazy("polynomial", "integrate_polynomial"),
+    "lsq": _lazy("lsq", "integrate_lsq"),
 }
 
 
