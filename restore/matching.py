@@ -500,8 +500,8 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
     a_patch, in_a = _gather(image_a, ra_l, ra_c, hl + g, hc + g)
     b_big, in_b = _gather(image_b, c0_l, c0_c, hl + sl + order, hc + sc + order)
     flags[~(in_a & in_b)] |= MatchFlag.OUT_OF_BOUNDS
-    a_ref = a_patch.mean(axis=(1, 2), dtype=np.float64)
-    b_ref = b_big.mean(axis=(1, 2), dtype=np.float64)
+    a_ref = a_patch.reshape(n, -1).mean(axis=1)
+    b_ref = b_big.reshape(n, -1).mean(axis=1)
     no_data = ~(np.isfinite(a_ref) & np.isfinite(b_ref))  # a NaN or inf anywhere
     flags[no_data] |= MatchFlag.NO_DATA
     if no_data.any():
@@ -537,10 +537,13 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
         if coef:
             g_l += _F32(coef) * a_patch[:, t:t + h, g:g + w]
             g_c += _F32(coef) * a_patch[:, g:g + h, t:t + w]
-    g_l -= g_l.mean(axis=(1, 2), keepdims=True)
-    g_c -= g_c.mean(axis=(1, 2), keepdims=True)
+    # the columns must be orthogonal to a constant (the offset between the
+    # bands): the gradients' means are removed in the normal matrix and in the
+    # products with B below, not from the arrays
     jac = np.stack([a_z, g_l, g_c], axis=1).reshape(n, 3, npx)
-    normal = np.einsum("nqp,nrp->nqr", jac, jac).astype(np.float64)
+    jmean = jac.mean(axis=2, dtype=np.float64)
+    jmean[:, 0] = 0.0  # a_z is zero-mean already
+    normal = np.einsum("nqp,nrp->nqr", jac, jac).astype(np.float64) - npx * jmean[:, :, None] * jmean[:, None, :]
     dsc = np.sqrt(np.einsum("nii->ni", normal))
     with np.errstate(divide="ignore", invalid="ignore"):
         det_corr = _inv3(normal / (dsc[:, :, None] * dsc[:, None, :]))[1]
@@ -575,22 +578,29 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
     for it in range(max_iter + 1):
         if active.size == 0:
             break
-        sel = slice(None) if active.size == n else active  # a view while all are active
+        # while most points are active, work on all of them (views, no copies)
+        # and freeze the converged ones; then on the shrinking active subset
+        full = active.size > n // 2
+        sel = slice(None) if full else active
+        live = ~converged if full else np.ones(active.size, dtype=bool)
         if it == 0:  # at the integer peak: no resampling
             b_res = patch[sel, order:order + h, order:order + w]
         else:
             b_res = resample_windows(patch[sel], d[sel, 0], d[sel, 1], order=order)
         b_flat = b_res.reshape(-1, npx)
-        c = np.matmul(jac[sel], b_flat[:, :, None])[:, :, 0].astype(np.float64)
         b_sum = b_flat.sum(axis=1, dtype=np.float64)
+        c = np.matmul(jac[sel], b_flat[:, :, None])[:, :, 0].astype(np.float64) - jmean[sel] * b_sum[:, None]
         sb = np.einsum("np,np->n", b_flat, b_flat).astype(np.float64) - b_sum * b_sum / npx
-        stats[sel, :3] = c
-        stats[sel, 3] = sb
+        st = np.concatenate([c, sb[:, None]], axis=1)
+        if full:
+            stats[live] = st[live]
+        else:
+            stats[sel] = st
         if it == max_iter:
             break
+        gain = c[:, 0] * inv_a2[sel]
         if method == "ncc" or it == 0:
             # Gauss-Newton step with the gain projected out (variable projection)
-            gain = c[:, 0] * inv_a2[sel]
             op = lk[sel]
             rhs = c - gain[:, None] * op[:, 2]
             safe = -1.0 / np.where(np.abs(gain) > 1e-12, gain, 1.0)
@@ -603,12 +613,12 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
             f = ph if it > 0 else f  # the first move is the Lucas-Kanade step
         d_sel = d[sel]
         sm = slope[sel]
+        pv = prev[sel]
         if it > 0:  # Broyden: S += (y - S s) s^T / s^T s, with y = F_prev - F, s = d - d_prev
-            pv = prev[sel]
             ds = d_sel - pv[:, :2]
             y = pv[:, 2:] - f
             ss = np.einsum("ni,ni->n", ds, ds)
-            upd = ss > 1e-8
+            upd = (ss > 1e-8) & live
             corr = (y - np.einsum("nij,nj->ni", sm, ds)) / np.where(upd, ss, 1.0)[:, None]
             sm = sm + np.where(upd[:, None, None], corr[:, :, None] * ds[:, None, :], 0.0)
             det = sm[:, 0, 0] * sm[:, 1, 1] - sm[:, 0, 1] * sm[:, 1, 0]
@@ -616,11 +626,11 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
             bad = ~((det > 0.04) & (tr > 0.4) & (tr < 6.0) & (np.abs(sm).max(axis=(1, 2)) < 4.0))
             sm[bad] = np.eye(2)
             slope[sel] = sm
-        prev[sel] = np.concatenate([d_sel, ph], axis=1)
+        prev[sel] = np.where(live[:, None], np.concatenate([d_sel, ph], axis=1), pv)
         det = sm[:, 0, 0] * sm[:, 1, 1] - sm[:, 0, 1] * sm[:, 1, 0]
         step = np.stack([sm[:, 1, 1] * f[:, 0] - sm[:, 0, 1] * f[:, 1],
                          sm[:, 0, 0] * f[:, 1] - sm[:, 1, 0] * f[:, 0]], axis=1) / det[:, None]
-        step = np.clip(step, -_MAX_STEP, _MAX_STEP)
+        step = np.where(live[:, None], np.clip(step, -_MAX_STEP, _MAX_STEP), 0.0)
         d_new = d_sel + step
         # the match left the integer peak's cell: move the patch to the neighbour
         # (same interpolant, so F is continuous), within the search grid
@@ -643,13 +653,19 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
         d[sel] = np.clip(d_new, -0.999, 0.999)
         # converged: the step is below tol, or immaterial (a tenth of the
         # point's own standard deviation, e.g. across bands)
-        gain_n = c[:, 0] * inv_a2[sel]
-        sig2 = np.maximum(sb - c[:, 0] * gain_n, 0.0) / max(npx - 4, 1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            noise_step = 0.1 * np.sqrt(sig2[:, None] * ninv_d[sel]) / np.abs(gain_n)[:, None]
-        done = (np.abs(step) < np.maximum(tol, np.nan_to_num(noise_step))).all(axis=1)
-        converged[active[done]] = True
-        active = active[~done]
+        small = (np.abs(step) < tol).all(axis=1)
+        unsure = live & ~small
+        if unsure.any():
+            sig2 = np.maximum(sb - c[:, 0] * gain, 0.0) / max(npx - 4, 1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                noise_step = 0.1 * np.sqrt(sig2[:, None] * ninv_d[sel]) / np.abs(gain)[:, None]
+            small |= (np.abs(step) < np.nan_to_num(noise_step)).all(axis=1)
+        if full:
+            converged |= live & small
+            active = np.flatnonzero(~converged)
+        else:
+            converged[active[small]] = True
+            active = active[~small]
 
     # --- quality and a-posteriori precision --------------------------------------
     c0, sb = stats[:, 0], stats[:, 3]
