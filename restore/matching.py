@@ -171,18 +171,23 @@ def lanczos_weights(shift, *, order: int = 4) -> np.ndarray:
         raise ValueError(f"shift: expected a 1-D array, got shape {d.shape}")
     if d.size and not np.all(np.abs(d) < 1.0):
         raise ValueError("shift: must lie in (-1, 1)")
+    return _lanczos_weights(d, order)
+
+
+def _lanczos_weights(d: np.ndarray, order: int) -> np.ndarray:
+    """:func:`lanczos_weights` without checks, for any shape of ``d`` (taps last)."""
     k = np.arange(-order, order + 1, dtype=float)
-    x = k - d[:, None]
+    x = k - d[..., None]
     # sinc(x) sinc(x/a) = -a sin(pi d) (-1)^k sin(pi x / a) / (pi x)^2; the
     # factor common to all taps cancels in the normalisation
-    s, c = np.sin(np.pi * d / order)[:, None], np.cos(np.pi * d / order)[:, None]
+    s, c = np.sin(np.pi / order * d)[..., None], np.cos(np.pi / order * d)[..., None]
     sk, ck = np.cos(np.pi * k) * np.sin(np.pi * k / order), np.cos(np.pi * k) * np.cos(np.pi * k / order)
     w = (sk * c - ck * s) / np.where(x == 0.0, 1.0, x * x)
     w[np.abs(x) >= order] = 0.0
     on_tap = d == np.rint(d)  # integer position: the sample itself
     if on_tap.any():
         w[on_tap] = (x[on_tap] == 0.0).astype(float)
-    w /= w.sum(axis=1, keepdims=True)
+    w /= w.sum(axis=-1, keepdims=True)
     return w
 
 
@@ -216,6 +221,13 @@ def resample_windows(patches: np.ndarray, shift_lines, shift_cols, *, order: int
     wc = lanczos_weights(shift_cols, order=order).astype(dtype)
     if wl.shape[0] != patches.shape[0] or wc.shape[0] != patches.shape[0]:
         raise ValueError("shift_lines, shift_cols: need one shift per patch")
+    return _resample(patches, wl, wc)
+
+
+def _resample(patches: np.ndarray, wl: np.ndarray, wc: np.ndarray) -> np.ndarray:
+    """Separable resampling with per-patch tap weights (N, 2 order + 1) per axis."""
+    m = wl.shape[1] - 1
+    h, w = patches.shape[1] - m, patches.shape[2] - m
     # lines first: the (N, h, w + 2 order) intermediate is small for short windows
     swv = np.lib.stride_tricks.sliding_window_view
     rows = np.einsum("nk,nijk->nij", wl, swv(patches, m + 1, axis=1))
@@ -586,7 +598,8 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
         if it == 0:  # at the integer peak: no resampling
             b_res = patch[sel, order:order + h, order:order + w]
         else:
-            b_res = resample_windows(patch[sel], d[sel, 0], d[sel, 1], order=order)
+            wts = _lanczos_weights(d[sel], order).astype(_F32)  # (n, 2, taps)
+            b_res = _resample(patch[sel], wts[:, 0], wts[:, 1])
         b_flat = b_res.reshape(-1, npx)
         b_sum = b_flat.sum(axis=1, dtype=np.float64)
         c = np.matmul(jac[sel], b_flat[:, :, None])[:, :, 0].astype(np.float64) - jmean[sel] * b_sum[:, None]
