@@ -20,7 +20,9 @@ the prediction (search area and interpolation support), as in the processing
 line; ``skimage.registration.phase_cross_correlation(upsample_factor=100)``
 and ``cv2.phaseCorrelate`` get, one call per point, the A window and the B
 window of the same size at the predicted position (they have no search area).
-Times include the window extraction, for all methods.
+Times include the window extraction, for all methods; images are float32, as
+in products. Each method is timed ``repeat`` times, interleaved with the
+others, and the best run is kept (the machine may be shared).
 
 Run ``python -m reports.bench_matching`` to print the table.
 """

@@ -77,6 +77,8 @@ _G = _GRADIENT.size // 2
 _F32 = np.float32
 #: largest sub-pixel step per iteration and axis (px)
 _MAX_STEP = 0.5
+#: from this iteration on, a point whose step does not shrink is given up
+_STALL_IT = 8
 
 
 class MatchFlag(enum.IntFlag):
@@ -93,8 +95,9 @@ class MatchFlag(enum.IntFlag):
     SEARCH_BORDER = 8
     #: correlation at the refined position below ``min_quality``
     LOW_CORRELATION = 16
-    #: no convergence in ``max_iter`` iterations, or the refinement left the
-    #: integer peak's neighbourhood
+    #: no convergence in ``max_iter`` iterations, a step that stopped
+    #: shrinking (no root in reach), or the refinement stuck at the edge of
+    #: the search grid
     NOT_CONVERGED = 32
     #: estimated standard deviation above ``max_std``
     IMPRECISE = 64
@@ -543,16 +546,19 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
     patch = np.lib.stride_tricks.sliding_window_view(b_big, (hp, wp), axis=(1, 2))[idx, il, ic]
 
     # --- Gauss-Newton design: zero-mean [A, dA/dl, dA/dc], fixed -------------------
-    g_l = np.zeros_like(a_z)
-    g_c = np.zeros_like(a_z)
-    for t, coef in enumerate(_GRADIENT):
-        if coef:
-            g_l += _F32(coef) * a_patch[:, t:t + h, g:g + w]
-            g_c += _F32(coef) * a_patch[:, g:g + h, t:t + w]
+    jac = np.empty((n, 3, h, w), dtype=_F32)
+    jac[:, 0] = a_z
+    for ax, view in ((1, lambda t: a_patch[:, t:t + h, g:g + w]), (2, lambda t: a_patch[:, g:g + h, t:t + w])):
+        # antisymmetric filter: sum_t D_t (a[+t] - a[-t]), t = 1 .. g
+        out = jac[:, ax]
+        np.subtract(view(g + 1), view(g - 1), out=out)
+        out *= _F32(_GRADIENT[g + 1])
+        for t in range(2, g + 1):
+            out += _F32(_GRADIENT[g + t]) * (view(g + t) - view(g - t))
     # the columns must be orthogonal to a constant (the offset between the
     # bands): the gradients' means are removed in the normal matrix and in the
     # products with B below, not from the arrays
-    jac = np.stack([a_z, g_l, g_c], axis=1).reshape(n, 3, npx)
+    jac = jac.reshape(n, 3, npx)
     jmean = jac.mean(axis=2, dtype=np.float64)
     jmean[:, 0] = 0.0  # a_z is zero-mean already
     normal = np.einsum("nqp,nrp->nqr", jac, jac).astype(np.float64) - npx * jmean[:, :, None] * jmean[:, None, :]
@@ -579,6 +585,8 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
     slope = np.tile(np.eye(2), (n, 1, 1))
     prev = np.zeros((n, 4))  # previous (d_l, d_c, F_l, F_c)
     converged = singular | hopeless
+    gave_up = np.zeros(n, dtype=bool)
+    hist = np.full((n, 2), np.inf)  # step sizes of the two previous iterations, px
     swv = np.lib.stride_tricks.sliding_window_view
     if method == "phase":
         fa = np.fft.rfft2(a_z)
@@ -594,7 +602,7 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
         # and freeze the converged ones; then on the shrinking active subset
         full = active.size > n // 2
         sel = slice(None) if full else active
-        live = ~converged if full else np.ones(active.size, dtype=bool)
+        live = ~(converged | gave_up) if full else np.ones(active.size, dtype=bool)
         if it == 0:  # at the integer peak: no resampling
             b_res = patch[sel, order:order + h, order:order + w]
         else:
@@ -673,12 +681,22 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
             with np.errstate(divide="ignore", invalid="ignore"):
                 noise_step = 0.1 * np.sqrt(sig2[:, None] * ninv_d[sel]) / np.abs(gain)[:, None]
             small |= (np.abs(step) < np.nan_to_num(noise_step)).all(axis=1)
+        # stalled: late, and the step has not shrunk in two iterations (drift
+        # along a flat direction, no root in reach): give up, NOT_CONVERGED
+        norm = np.abs(step).max(axis=1)
+        stalled = np.zeros_like(small)
+        if it >= _STALL_IT:
+            stalled = ~small & (norm > 0.8 * hist[sel, 1])
+        hist[sel] = np.where(live[:, None], np.stack([norm, hist[sel, 0]], axis=1), hist[sel])
+        stop = small | stalled
         if full:
             converged |= live & small
-            active = np.flatnonzero(~converged)
+            gave_up |= live & stalled
+            active = np.flatnonzero(~(converged | gave_up))
         else:
             converged[active[small]] = True
-            active = active[~small]
+            gave_up[active[stalled]] = True
+            active = active[~stop]
 
     # --- quality and a-posteriori precision --------------------------------------
     c0, sb = stats[:, 0], stats[:, 3]

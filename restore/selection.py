@@ -199,6 +199,12 @@ def texture_mask(image, *, window=(3, 31), noise_std=None, max_std=0.2, min_cont
     ndarray of bool, shape of ``image``
         True where the texture is good enough to match.
     """
+    return _texture(image, window=window, noise_std=noise_std, max_std=max_std, min_contrast=min_contrast,
+                    saturation=saturation, max_level=max_level)[0]
+
+
+def _texture(image, *, window, noise_std, max_std, min_contrast, saturation, max_level):
+    """:func:`texture_mask` and the a-priori standard deviations it rests on."""
     img = _as_image(image)
     window = _check_window(window)
     if not max_std > 0:
@@ -227,7 +233,7 @@ def texture_mask(image, *, window=(3, 31), noise_std=None, max_std=0.2, min_cont
     # the gradient reads 2 pixels beyond the window
     if bad.any():
         ok &= ~_dilate(bad, (window[0] + 4, window[1] + 4))
-    return ok
+    return ok, std_l, std_c
 
 
 def _hessian_score(img: np.ndarray, sigma: float) -> np.ndarray:
@@ -477,18 +483,18 @@ def select_points(image, *, method="grid", per_line=20, window=(3, 31), search=(
         ml, mc = (int(v) for v in margin)
     except (TypeError, ValueError):
         raise ValueError(f"margin: expected (lines, columns), got {margin!r}") from None
-    ml = max(ml, window[0] // 2)
-    mc = max(mc, window[1] // 2)
     if ml < 0 or mc < 0:
         raise ValueError(f"margin: must be >= 0, got {margin!r}")
+    ml = max(ml, window[0] // 2)
+    mc = max(mc, window[1] // 2)
     empty = (np.zeros(0), np.zeros(0))
     if n_lines <= 2 * ml or n_cols <= 2 * mc:
         return empty
 
     if noise_std is None:
         noise_std = estimate_noise(img)
-    usable = texture_mask(img, window=window, noise_std=noise_std, max_std=max_std, min_contrast=min_contrast,
-                          saturation=saturation, max_level=max_level)
+    usable, std_l, std_c = _texture(img, window=window, noise_std=noise_std, max_std=max_std,
+                                    min_contrast=min_contrast, saturation=saturation, max_level=max_level)
     if mask is not None:
         mask = np.asarray(mask, dtype=bool)
         if mask.shape != img.shape:
@@ -521,8 +527,6 @@ def select_points(image, *, method="grid", per_line=20, window=(3, 31), search=(
         return li[keep], ci[keep]
 
     # spread: best a-priori precision in each column bin of each line
-    std_l, std_c = expected_matching_std(np.where(np.isfinite(img), img, 0.0), window=window,
-                                         noise_std=noise_std)
     quality = np.where(usable, -np.maximum(std_l, std_c), -np.inf)
     li = np.flatnonzero(rows)
     span = c_hi - c_lo + 1

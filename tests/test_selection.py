@@ -63,7 +63,8 @@ def test_texture_mask_rejects_water_cloud_and_no_data(scene):
     assert not ok[130 - 1:140 + 1, 20 - 15:60 + 15].any()   # windows touching no data
     # bright and smooth without saturation: the relative contrast criterion
     ll, cc = np.mgrid[0:40, 0:100]
-    smooth = 3000.0 + 5.0 * np.sin(0.7 * ll) * np.sin(0.5 * cc) + 0.5 * np.random.default_rng(2).standard_normal((40, 100))
+    smooth = 3000.0 + 5.0 * np.sin(0.7 * ll) * np.sin(0.5 * cc)
+    smooth += 0.5 * np.random.default_rng(2).standard_normal((40, 100))
     assert texture_mask(smooth, noise_std=0.5, max_std=10.0).mean() > 0.5
     assert not texture_mask(smooth, noise_std=0.5, max_std=10.0, min_contrast=0.01).any()
     assert not texture_mask(smooth, noise_std=0.5, max_std=10.0, max_level=2000.0).any()
@@ -175,7 +176,8 @@ def test_select_points_line_mask_and_step(scene):
 
 @pytest.mark.parametrize("kw, name", [({"method": "random"}, "method"), ({"per_line": 0}, "per_line"),
                                       ({"line_step": 0}, "line_step"), ({"mask": np.zeros((3, 3), bool)}, "mask"),
-                                      ({"line_mask": np.zeros(3, bool)}, "line_mask")])
+                                      ({"line_mask": np.zeros(3, bool)}, "line_mask"),
+                                      ({"margin": (-1, 0)}, "margin")])
 def test_select_points_bad_parameters(scene, kw, name):
     with pytest.raises(ValueError, match=name):
         select_points(scene, **kw)
