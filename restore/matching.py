@@ -70,7 +70,7 @@ __all__ = [
 
 _METHODS = ("ncc", "phase")
 #: points per batch: keeps the stacks in cache and bounds memory
-_CHUNK = 512
+_CHUNK = 2048
 #: antisymmetric gradient filter of the A window (Gauss-Newton Jacobian), 1/px
 _GRADIENT = np.array([1.0, -8.0, 0.0, 8.0, -1.0]) / 12.0
 _G = _GRADIENT.size // 2
@@ -600,7 +600,7 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
             break
         # while most points are active, work on all of them (views, no copies)
         # and freeze the converged ones; then on the shrinking active subset
-        full = active.size > n // 2
+        full = active.size > (9 * n) // 10
         sel = slice(None) if full else active
         live = ~(converged | gave_up) if full else np.ones(active.size, dtype=bool)
         if it == 0:  # at the integer peak: no resampling
