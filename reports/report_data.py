@@ -1240,7 +1240,11 @@ def misregistration_rows(run: RunData) -> list:
     """Band-to-band misregistration before/after correction (restoration attr ``misregistration``).
 
     Returns a list of ``{pair, before_px, after_px, before_line_px, before_col_px,
-    after_line_px, after_col_px, lines, improvement}`` (missing keys NaN).
+    after_line_px, after_col_px, after_noise_px, after_signal_px,
+    after_line_signal_px, after_col_signal_px, lines, improvement}`` (missing
+    keys NaN). ``after_px`` is as measured (matching noise of a per-line mean
+    included, ``after_noise_px``); ``after_signal_px`` is the split-half
+    estimate without that noise (see :func:`restore.correction.per_line_shift_rms`).
     """
     rest = run.restoration
     if rest is None:
@@ -1250,7 +1254,8 @@ def misregistration_rows(run: RunData) -> list:
     except json.JSONDecodeError:
         return []
     rows = []
-    keys = ("before_px", "after_px", "before_line_px", "before_col_px", "after_line_px", "after_col_px")
+    keys = ("before_px", "after_px", "before_line_px", "before_col_px", "after_line_px", "after_col_px",
+            "after_noise_px", "after_signal_px", "after_line_signal_px", "after_col_signal_px")
     for pair, v in mis.items():
         if not isinstance(v, dict):
             continue
@@ -1261,6 +1266,18 @@ def misregistration_rows(run: RunData) -> list:
         r["lines"] = int(v.get("lines", 0) or 0)
         r["improvement"] = r["before_px"] / r["after_px"] if r["after_px"] and r["after_px"] > 0 else float("nan")
         rows.append(r)
+    # with truth: the misregistration the restored attitude's error leaves (geometric, noise-free)
+    geo = {}
+    if run.truth is not None:
+        from .metrics import attitude_misregistration
+        try:
+            geo = attitude_misregistration(rest, run.truth)
+        except (KeyError, ValueError):
+            geo = {}
+    for r in rows:
+        g = geo.get(r["pair"], {}).get("restored", {})
+        for k in ("line_px", "col_px", "total_px"):
+            r[f"attitude_{k}"] = float(g.get(k, float("nan")))
     return rows
 
 

@@ -295,26 +295,30 @@ def draw_match_density(ax, d: dict, name: str, *, show_rejected: bool = True, co
 
 
 def draw_misregistration(ax, rows: list):
-    """Grouped bars: misregistration before / after correction per pair (total, line, column), px."""
+    """Grouped bars per pair: misregistration before correction, after (as measured, matching noise
+    included) and after with the matching noise removed (when known), px (2-D RMS of the per-line shift)."""
     if not rows:
         ax.text(0.5, 0.5, "no misregistration data", transform=ax.transAxes, ha="center")
         return ax.figure
-    comps = [("before_px", "before", C_KNOW, 1.0), ("after_px", "after", C_REST, 1.0)]
+    comps = [("before_px", "before correction", C_KNOW), ("after_px", "after, as measured", C_REST)]
+    if any(np.isfinite(r.get("after_signal_px", np.nan)) for r in rows):
+        comps.append(("after_signal_px", "after, matching noise removed", "0.45"))
     x = np.arange(len(rows))
-    w = 0.38
-    for k, (key, label, color, _) in enumerate(comps):
-        v = [r[key] for r in rows]
-        bars = ax.bar(x + (k - 0.5) * w, v, width=w * 0.95, color=color, label=f"{label} correction")
+    w = 0.8 / len(comps)
+    for k, (key, label, color) in enumerate(comps):
+        v = [r.get(key, np.nan) for r in rows]
+        bars = ax.bar(x + (k - (len(comps) - 1) / 2) * w, v, width=w * 0.95, color=color, label=label)
         for b, val in zip(bars, v):
-            if np.isfinite(val):
+            if np.isfinite(val) and val > 0:
                 ax.text(b.get_x() + b.get_width() / 2, val, f"{val:.3f}", ha="center", va="bottom", fontsize=7.5)
     ax.set_xticks(x, [r["pair"] for r in rows])
     ax.set_ylabel("RMS of per-line shift [px]")
     ax.set_yscale("log")
-    lo = min([r["after_px"] for r in rows if np.isfinite(r["after_px"]) and r["after_px"] > 0] or [1e-3])
+    vals = [r.get(k, np.nan) for r in rows for k, _, _ in comps[1:]]
+    lo = min([v for v in vals if np.isfinite(v) and v > 0] or [1e-3])
     hi = max([r["before_px"] for r in rows if np.isfinite(r["before_px"])] or [1.0])
-    ax.set_ylim(lo / 2.5, hi * 2.5)
-    ax.legend(loc="upper right")
+    ax.set_ylim(lo / 2.5, hi * 4.0)
+    ax.legend(loc="upper right", fontsize=8)
     return ax.figure
 
 

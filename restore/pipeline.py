@@ -170,8 +170,9 @@ class RestorationResult:
         if self.misregistration:
             for k, v in self.misregistration.items():
                 lines.append(f"  misregistration {k}: before {v['before_px']:.3f} px, after {v['after_px']:.3f} px "
-                             f"(RMS of per-line shifts; of which matching noise {v['after_noise_px']:.3f} px, "
-                             f"net {v['after_net_px']:.3f} px)")
+                             f"measured (line {v['after_line_px']:.3f}, column {v['after_col_px']:.3f}; matching "
+                             f"noise {v['after_noise_px']:.3f} px); without the noise {v['after_signal_px']:.3f} px "
+                             f"(line {v['after_line_signal_px']:.3f}, column {v['after_col_signal_px']:.3f})")
         t = self.timings
         lines.append(f"  time: {t.get('total_s', 0):.1f} s ({t.get('lines_per_s', 0):.0f} lines/s, "
                      f"{t.get('matches_per_s', 0):.0f} matches/s)")
