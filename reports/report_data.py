@@ -37,7 +37,7 @@ __all__ = [
     "AXES", "RunData", "load_run", "read_product_light", "get_integrator", "scenario_summary", "restored_axes",
     "attitude_table", "headline", "minmax_decimate", "zoom_window", "longest_finite_run", "welch_settings",
     "spectra", "integration_probe", "measured_transfer", "analytic_chain_gain", "analytic_joint_gain",
-    "wiener_k", "true_differentials", "error_budget", "freeze_integration", "frozen_chain_gain",
+    "wiener_k", "true_differentials", "line_lags", "error_budget", "freeze_integration", "frozen_chain_gain",
     "axis_integration", "measured_differentials", "match_density", "misregistration_rows",
     "scene_geometry", "pair_file_tag",
 ]
@@ -887,7 +887,39 @@ def _highpass(d, te, settings):
     return highpass_nan(d, dt=te, cutoff_hz=hp)
 
 
-def true_differentials(run: RunData, axis: str, *, previous_estimate=None) -> tuple:
+def line_lags(run: RunData) -> np.ndarray | None:
+    """Extra delay of each pair at each line of band A [lines] (time synchronisation), from the matches.
+
+    Band B sees the ground of line ``l`` of A at ``t + τ + λ(l)·Te``, where
+    ``λ`` is the line residual (measured − predicted with knowledge) of the
+    inliers, averaged per line, interpolated over lines without inliers; the
+    measured differentials are ``δ(t + τ + λ Te) − δ(t)`` (pitch jitter changes
+    the actual delay). Returns ``(pair, line)`` or None without matches.
+    """
+    rest = run.restoration
+    need = ("match_pair", "match_line_a", "match_meas_line_b", "match_pred_line_b", "match_inlier")
+    if rest is None or any(k not in rest for k in need):
+        return None
+    n = run.time.size
+    pair = np.asarray(rest["match_pair"].values).astype(np.int64)
+    la = np.rint(np.asarray(rest["match_line_a"].values, dtype=np.float64))
+    dl = np.asarray(rest["match_meas_line_b"].values, dtype=np.float64) - \
+        np.asarray(rest["match_pred_line_b"].values, dtype=np.float64)
+    inl = np.asarray(rest["match_inlier"].values).astype(bool) & np.isfinite(dl) & (la >= 0) & (la < n)
+    out = np.zeros((len(run.pairs), n))
+    for j in range(len(run.pairs)):
+        s = inl & (pair == j)
+        li = la[s].astype(np.int64)
+        c = np.bincount(li, minlength=n)
+        m = c > 0
+        if not m.any():
+            continue
+        lag = np.bincount(li, dl[s], minlength=n)[m] / c[m]
+        out[j] = np.interp(np.arange(n), np.flatnonzero(m), lag)
+    return out
+
+
+def true_differentials(run: RunData, axis: str, *, previous_estimate=None, lags=None) -> tuple:
     """True differentials ``δ(t+τ_j) − δ(t)`` per pair (pair, line) [rad], NaN where the measured one is NaN.
 
     ``δ = true − knowledge − previous`` is the remaining error the last
@@ -900,7 +932,9 @@ def true_differentials(run: RunData, axis: str, *, previous_estimate=None) -> tu
     unestimated stretch; it is fitted there by least squares against the
     measured differentials (0 without a previous estimate or without such lines).
     Truth: cubic interpolation of its fine sampling; knowledge: the product's
-    series.
+    series. ``lags`` (pair, line) [lines], e.g. :func:`line_lags`: the far end
+    is taken at ``t + τ_j + lag·Te`` (the delay actually seen by the images)
+    instead of the nominal ``t + τ_j``.
 
     Returns
     -------
@@ -929,10 +963,11 @@ def true_differentials(run: RunData, axis: str, *, previous_estimate=None) -> tu
         sp_r = CubicSpline(t, np.where(m, pe, 0.0))
         sp_m = CubicSpline(t, m.astype(np.float64))
     for j, tau in enumerate(run.taus):
-        b = delta(t + tau) - d0
+        t1 = t + tau + (0.0 if lags is None else np.asarray(lags[j], dtype=np.float64) * run.line_period_s)
+        b = delta(t1) - d0
         if sp_r is not None:
-            b = b - (sp_r(t + tau) - sp_r(t))
-            slope[j] = -(sp_m(t + tau) - sp_m(t))
+            b = b - (sp_r(t1) - sp_r(t))
+            slope[j] = -(sp_m(t1) - sp_m(t))
         base[j] = np.where(np.isfinite(meas[j]), b, np.nan)
     c = 0.0
     if sp_r is not None:
@@ -1103,9 +1138,12 @@ def error_budget(run: RunData, *, integrate: Callable | None = None, seed: int =
             fill = np.nanmedian(s_) if np.isfinite(s_).any() else 0.0
             s_ = np.where(np.isfinite(meas) & ~np.isfinite(s_), fill, s_)
             noise = s_ * rng.standard_normal(s_.shape)
-        dtrue = prev_used = None
+        dtrue = prev_used = dlag = None
         if have_truth:
             dtrue, prev_used = true_differentials(run, a, previous_estimate=prev)
+            lags = line_lags(run)
+            if lags is not None:
+                dlag = true_differentials(run, a, previous_estimate=prev, lags=lags)[0]
         # differential-level rows
         for j, pname in enumerate(run.pairs):
             row = {"pair": pname, "axis": a, "tau_s": run.taus[j], "lines": int(np.isfinite(meas[j]).sum())}
@@ -1113,8 +1151,16 @@ def error_budget(run: RunData, *, integrate: Callable | None = None, seed: int =
                 sj = sig[j][np.isfinite(meas[j]) & np.isfinite(sig[j])]
                 row["matching_sigma_urad"] = float(np.sqrt(np.mean(sj ** 2)) * 1e6) if sj.size else float("nan")
             if dtrue is not None:
-                r = meas[j] - dtrue[j]
+                # measured against the truth at the delay the images actually saw (time
+                # synchronisation): what is left is the error of the measurement itself
+                ref = dlag if dlag is not None else dtrue
+                r = meas[j] - ref[j]
                 r = r[np.isfinite(r)]
+                if dlag is not None:
+                    ts = (dlag[j] - dtrue[j])[np.isfinite(meas[j])]
+                    ts = ts[np.isfinite(ts)]
+                    row["time_sync_rms_urad"] = float(np.sqrt(np.mean((ts - ts.mean()) ** 2)) * 1e6) if ts.size \
+                        else float("nan")
                 row["meas_minus_true_rms_urad"] = float(np.sqrt(np.mean((r - r.mean()) ** 2)) * 1e6) if r.size \
                     else float("nan")
                 row["meas_minus_true_mean_urad"] = float(r.mean() * 1e6) if r.size else float("nan")

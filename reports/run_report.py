@@ -435,13 +435,16 @@ def _budget_section(pg: _Page, run: D.RunData, integrate, max_integration_s: flo
     if drows:
         keys = ["pair", "axis", "tau_s", "lines", "matching_sigma_urad", "meas_minus_true_rms_urad",
                 "model_rms_urad", "meas_minus_true_mean_urad", "matching_sigma_px", "meas_minus_true_rms_px",
-                "model_rms_px"]
+                "model_rms_px", "time_sync_rms_urad", "time_sync_rms_px"]
         keys = [k for k in keys if any(k in r for r in drows)]
         trs = [[_e(r["pair"]), _e(r["axis"]), _fmt(r["tau_s"] * 1e3), _fmt(r["lines"])] +
                [_fmt(r.get(k, float("nan"))) for k in keys[4:]] for r in drows]
         hdr = ["pair", "axis", "τ [ms]", "lines"] + [k.replace("_urad", " [µrad]").replace("_px", " [px]")
                                                      .replace("_", " ") for k in keys[4:]]
-        pg.html("<p><b>Differential level</b> (per pair, before integration):</p>")
+        pg.html("<p><b>Differential level</b> (per pair, before integration): measured differentials against "
+                "the true ones at the delay the images actually saw, τ + λ(t) with λ the per-line line residual of "
+                "the matches (pitch jitter changes the delay; the restoration models it, see time synchronisation); "
+                "<i>time sync</i> is the size of that effect, true(τ + λ) − true(τ).</p>")
         pg.table(hdr, trs)
         links.append(pg.csv("budget_differentials.csv", {k: [r.get(k, float("nan")) for r in drows] for k in keys}))
     if links:
