@@ -6,7 +6,6 @@ import os
 import resource
 import subprocess
 import sys
-import tempfile
 import time as _time
 from pathlib import Path
 
@@ -24,8 +23,7 @@ def _peak_rss_gb() -> float:
 def _render_measure(scenario: str, lines: int | None, full: bool) -> dict:
     """Render a scenario (or its first ``lines`` lines) and measure throughput vs the ray_intersect ceiling."""
     from simsat.scenario import load_scenario
-    from simsat.simulate import build_world
-    from simsat.render.pushbroom import PushbroomRenderer
+    from simsat.simulate import build_world, make_renderer
 
     over = {"acquisition": {"lines": lines}} if lines else None
     t0 = _time.perf_counter()
@@ -33,8 +31,7 @@ def _render_measure(scenario: str, lines: int | None, full: bool) -> dict:
     model, dem, known, texture, irr = build_world(sc)
     t_world = _time.perf_counter() - t0
     t1 = _time.perf_counter()
-    r = PushbroomRenderer(platform=sc.platform, instrument=sc.instrument, dem=dem, texture=texture,
-                          attitude=model.evaluate, irradiance=irr)
+    r = make_renderer(sc, model, dem, texture, irr)
     t_scene = _time.perf_counter() - t1
     t_lines = sc.line_times
     r.render(t_lines, block_lines=sc.acquisition.block_lines)

@@ -1262,7 +1262,7 @@ def match_density(run: RunData, *, line_bins: int = 200, col_bins: int = 16, max
         idf = np.flatnonzero(rej & ~valid)
         if idf.size > max_rejected_points:
             idf = np.sort(rng.choice(idf, max_rejected_points, replace=False))
-        if f"diff_points" in rest:
+        if "diff_points" in rest:
             ppl = np.asarray(rest["diff_points"].values)[j].astype(np.int64)
         else:
             ppl = np.bincount(np.rint(la[ok & inl]).astype(np.int64).clip(0, n_lines - 1), minlength=n_lines)

@@ -678,7 +678,7 @@ def make_run_report(run_dir, *, out_dir=None, integrator: Callable | None = None
             f"{', truth.nc' if run.truth is not None else ''} · summary data: {link}, "
             f'<a href="report.json">report.json</a></p>',
             f"<nav>{nav}</nav>"] + top.parts + body + [
-            f'<p class="meta">Report timings: ' + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()) + "</p>",
+            '<p class="meta">Report timings: ' + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()) + "</p>",
             "</body></html>"]
     index = out / "index.html"
     P.atomic_write_bytes(index, "\n".join(page).encode("utf-8"))

@@ -230,7 +230,7 @@ def resample_windows(patches: np.ndarray, shift_lines, shift_cols, *, order: int
 def _resample(patches: np.ndarray, wl: np.ndarray, wc: np.ndarray) -> np.ndarray:
     """Separable resampling with per-patch tap weights (N, 2 order + 1) per axis."""
     m = wl.shape[1] - 1
-    h, w = patches.shape[1] - m, patches.shape[2] - m
+    w = patches.shape[2] - m
     # lines first: the (N, h, w + 2 order) intermediate is small for short windows
     swv = np.lib.stride_tricks.sliding_window_view
     rows = np.einsum("nk,nijk->nij", wl, swv(patches, m + 1, axis=1))

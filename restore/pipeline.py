@@ -388,7 +388,7 @@ def _synthesise(product: Product, pair: PairData, sm, settings: RestorationSetti
 def restore_product(product: Product, settings: RestorationSettings | None = None, *, progress: bool = False,
                     run_dir: Path | None = None) -> RestorationResult:
     """Restore the line-of-sight attitude of a product (never reads truth)."""
-    from .integration import DEFAULT_METHOD, integrate
+    from .integration import DEFAULT_METHOD
 
     settings = settings or RestorationSettings()
     t_all = _time.perf_counter()
@@ -425,7 +425,6 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
         for it in range(settings.iterations):
             ts = _time.perf_counter()
             if it == 0:
-                att_fn = None
                 sm_it = sm
             else:
                 cur = {a: knowledge[a] + np.nan_to_num(estimate[a]) for a in AXES}

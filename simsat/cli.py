@@ -7,7 +7,6 @@ is the application shell that chains them, so it imports ``restore`` and
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from pathlib import Path

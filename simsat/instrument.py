@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .config import ScenarioError, Section
+from .config import Section
 
 __all__ = ["Detector", "Radiometry", "Instrument", "instrument_from_config"]
 

@@ -1,10 +1,10 @@
 """Scenario → rendered multi-band product + exact truth (the `simsat render` command)."""
 from __future__ import annotations
 
-import json
 import os
 import platform as _pyplatform
 import shutil
+import math
 import sys
 import tempfile
 import time as _time
@@ -65,6 +65,17 @@ def build_world(sc: Scenario):
     return model, dem, known, texture, irr
 
 
+def make_renderer(sc, model, dem, texture, irr):
+    """The push-broom renderer of a scenario's world (:func:`build_world`)."""
+    from .render.pushbroom import PushbroomRenderer
+
+    sun = sc.sun()
+    # cloud tops are lit like flat ground in the open (no relief shading, no cast shadow)
+    cloud_irr = sun.ambient + (1.0 - sun.ambient) * math.sin(math.radians(sun.elevation_deg))
+    return PushbroomRenderer(platform=sc.platform, instrument=sc.instrument, dem=dem, texture=texture,
+                             attitude=model.evaluate, irradiance=irr, cloud_irradiance=cloud_irr)
+
+
 def _versions() -> dict:
     out = {"python": sys.version.split()[0], "platform": _pyplatform.platform()}
     for mod in ("numpy", "scipy", "mitsuba", "drjit", "xarray", "netCDF4", "cv2"):
@@ -87,8 +98,6 @@ def simulate(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: 
     looks whole.
     """
     import xarray as xr
-    from .attitude import AttitudeSeries
-    from .render.pushbroom import PushbroomRenderer
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     out_dir = Path(out_dir)
@@ -104,8 +113,7 @@ def simulate(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: 
     t_lines = sc.line_times
 
     t = _time.perf_counter()
-    renderer = PushbroomRenderer(platform=sc.platform, instrument=inst, dem=dem, texture=texture,
-                                 attitude=model.evaluate, irradiance=irr)
+    renderer = make_renderer(sc, model, dem, texture, irr)
     timings["scene_build_s"] = _time.perf_counter() - t
 
     bar = None

@@ -641,3 +641,35 @@ def test_texture_from_config_orthoimage(tmp_path):
     bad = Section({"kind": "orthoimage", "path": "o.tif", "channels": {"swir": 1}}, "scene.texture")
     with pytest.raises(ScenarioError, match=r"^scene\.texture\.channels\.swir: unknown band"):
         texture_from_config(bad, base_dir=tmp_path, seed=0)
+
+
+def test_terrain_shading_lights_the_ground_not_the_clouds():
+    tex = ProceduralTexture(seed=3, cloud_fraction=0.5, texel_m=2.0)
+    nx, ny = 400, 300
+    rng = np.random.default_rng(0)
+    irr_a = rng.uniform(0.2, 1.0, (ny, nx))
+    irr_b = rng.uniform(0.2, 1.0, (ny, nx))
+    # a window across a cloud edge, found on a coarse land-cover map
+    coarse = tex.land_cover_grid(-15000.0, -15000.0, 50.0, 600, 600) == LandCover.CLOUD
+    frac = ndimage.uniform_filter(coarse.astype(float), size=(12, 16))
+    j, i = np.unravel_index(np.argmin(np.abs(frac - 0.5)), frac.shape)
+    x0, y0 = -15000.0 + i * 50.0 - nx, -15000.0 + j * 50.0 - ny
+    plain = tex.grid(x0, y0, 2.0, nx, ny)
+    a = tex.grid(x0, y0, 2.0, nx, ny, ground_irradiance=irr_a, cloud_irradiance=0.8)
+    b = tex.grid(x0, y0, 2.0, nx, ny, ground_irradiance=irr_b, cloud_irradiance=0.8)
+    cls = tex.land_cover_grid(x0, y0, 2.0, nx, ny)
+    cloud = cls == LandCover.CLOUD
+    assert 0.2 < cloud.mean() < 0.8
+    # cloud interiors (full opacity): the same whatever the ground's shading
+    inner = ndimage.binary_erosion(cloud, iterations=15)
+    assert inner.sum() > 500
+    same = np.isclose(a[:, inner], b[:, inner], rtol=1e-5, atol=1e-6).all(axis=0)
+    assert same.mean() > 0.95
+    # and lit by the cloud-top irradiance
+    np.testing.assert_allclose(a[:, inner][:, same], 0.8 * plain[:, inner][:, same], rtol=1e-5, atol=1e-6)
+    # clear ground far from clouds: reflectance × its own irradiance
+    clear = ndimage.binary_erosion(~cloud, iterations=40)
+    assert clear.sum() > 500
+    np.testing.assert_allclose(a[:, clear], plain[:, clear] * irr_a[clear], rtol=1e-4, atol=1e-6)
+    with pytest.raises(ValueError, match="ground_irradiance"):
+        tex.grid(0.0, 0.0, 2.0, nx, ny, ground_irradiance=irr_a[:10])

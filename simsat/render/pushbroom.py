@@ -97,18 +97,22 @@ class PushbroomRenderer:
         The true terrain.
     texture : object
         Has ``bands`` (sequence of names), ``texel_m`` and
-        ``grid(x0_m, y0_m, texel_m, nx, ny) -> (nbands, ny, nx)`` reflectance.
+        ``grid(x0_m, y0_m, texel_m, nx, ny, *, ground_irradiance=None, cloud_irradiance=1.0)
+        -> (nbands, ny, nx)`` reflectance (× irradiance when given).
     attitude : callable
         True attitude ``attitude(t) -> (roll, pitch, yaw)`` [rad].
     irradiance : simsat.terrain.Dem-like or None
         Sun irradiance factor on the DEM grid (``height(x, y)`` bilinear); None
-        = uniform illumination of 1.
+        = uniform illumination of 1. It shades the ground, not the clouds.
+    cloud_irradiance : float
+        Irradiance factor of cloud tops (horizontal, above the relief's
+        shading and shadows): flat-ground sun + sky light.
     lift_m : float
         Height above the highest terrain where rays start (float32 hand-off).
     """
 
     def __init__(self, *, platform, instrument, dem, texture, attitude, irradiance=None, lift_m: float = 2000.0,
-                 texel_m: float | None = None):
+                 texel_m: float | None = None, cloud_irradiance: float = 1.0):
         self.variant = choose_variant()
         import mitsuba as mi  # noqa: F401  (variant set)
 
@@ -118,6 +122,7 @@ class PushbroomRenderer:
         self.texture = texture
         self.attitude = attitude
         self.irradiance = irradiance
+        self.cloud_irradiance = float(cloud_irradiance)
         self.lift_m = float(lift_m)
         self.texel_m = float(texel_m or getattr(texture, "texel_m", 1.0))
         self.scene = build_terrain_scene(dem)
@@ -187,11 +192,15 @@ class PushbroomRenderer:
         nx = self._tile_nx + 2 * pad
         ny = self._tile_ny + 2 * pad
         t0 = _time.perf_counter()
-        tex = np.asarray(self.texture.grid(x0, y0, te, nx, ny), dtype=np.float32)
         if self.irradiance is not None:
+            # terrain shading lights the ground; cloud tops get the flat-ground irradiance
             xs = x0 + (np.arange(nx) + 0.5) * te
             ys = y0 + (np.arange(ny) + 0.5) * te
-            tex = tex * _bilinear_grid(self.irradiance, xs, ys).astype(np.float32)[None]
+            irr = _bilinear_grid(self.irradiance, xs, ys).astype(np.float32)
+            tex = np.asarray(self.texture.grid(x0, y0, te, nx, ny, ground_irradiance=irr,
+                                               cloud_irradiance=self.cloud_irradiance), dtype=np.float32)
+        else:
+            tex = np.asarray(self.texture.grid(x0, y0, te, nx, ny), dtype=np.float32)
         self.stats.texture_synthesis_s += _time.perf_counter() - t0
         t0 = _time.perf_counter()
         if len(self._kernel) > 1:

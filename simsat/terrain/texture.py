@@ -364,7 +364,8 @@ class ProceduralTexture:
             self._t_cloud = inf
 
     # -- public API ------------------------------------------------------------
-    def grid(self, x0_m: float, y0_m: float, texel_m: float, nx: int, ny: int) -> np.ndarray:
+    def grid(self, x0_m: float, y0_m: float, texel_m: float, nx: int, ny: int, *, ground_irradiance=None,
+             cloud_irradiance: float = 1.0) -> np.ndarray:
         """Reflectance on a regular texel grid.
 
         Parameters
@@ -377,20 +378,37 @@ class ProceduralTexture:
         nx, ny : int
             Number of texels along x and y.
 
+        ground_irradiance : ndarray (ny, nx), optional, keyword-only
+            Relative sun irradiance of the ground at the texels (terrain
+            shading and cast shadows, e.g. from
+            :func:`~simsat.terrain.illumination.sun_irradiance`). Given, the
+            result is reflectance × irradiance: the ground is shaded by it,
+            cloud tops (which float above the relief) by ``cloud_irradiance``.
+        cloud_irradiance : float, keyword-only
+            Relative irradiance of cloud tops (used with ``ground_irradiance``).
+
         Returns
         -------
         ndarray (nbands, ny, nx) float32
-            Reflectance in [0, 1], bands in ``self.bands`` order. A texel's value
-            depends only on its centre (to 1/1024 m), so tiles offset by whole
-            texels reproduce a big block exactly.
+            Reflectance in [0, 1] (× irradiance when given), bands in
+            ``self.bands`` order. A texel's value depends only on its centre
+            (to 1/1024 m), so tiles offset by whole texels reproduce a big
+            block exactly.
         """
-        return self._tiled(x0_m, y0_m, texel_m, nx, ny, want_bands=True, want_classes=False)[0]
+        shading = None
+        if ground_irradiance is not None:
+            shading = np.asarray(ground_irradiance, dtype=_F32)
+            if shading.shape != (int(ny), int(nx)):
+                raise ValueError(f"ground_irradiance: expected shape ({int(ny)}, {int(nx)}), got {shading.shape}")
+        return self._tiled(x0_m, y0_m, texel_m, nx, ny, want_bands=True, want_classes=False, shading=shading,
+                           cloud_irradiance=float(cloud_irradiance))[0]
 
     def grid_and_land_cover(self, x0_m: float, y0_m: float, texel_m: float, nx: int, ny: int):
         """:meth:`grid` and :meth:`land_cover_grid` in one pass: ``(reflectance, classes)``."""
         return self._tiled(x0_m, y0_m, texel_m, nx, ny, want_bands=True, want_classes=True)
 
-    def _tiled(self, x0_m, y0_m, texel_m, nx, ny, *, want_bands: bool, want_classes: bool):
+    def _tiled(self, x0_m, y0_m, texel_m, nx, ny, *, want_bands: bool, want_classes: bool, shading=None,
+               cloud_irradiance: float = 1.0):
         _check_grid_args(x0_m, y0_m, texel_m, nx, ny)
         nx, ny = int(nx), int(ny)
         qx = quantise(x0_m + (np.arange(nx) + 0.5) * texel_m)[None, :]
@@ -404,7 +422,9 @@ class ProceduralTexture:
 
         def work(c):
             j0, j1, i0, i1 = c
-            cls, refl = self._evaluate(Coords(qx[:, i0:i1], qy[j0:j1], True), want_bands=want_bands)
+            cls, refl = self._evaluate(Coords(qx[:, i0:i1], qy[j0:j1], True), want_bands=want_bands,
+                                       shading=None if shading is None else shading[j0:j1, i0:i1],
+                                       cloud_irradiance=cloud_irradiance)
             if want_bands:
                 out[:, j0:j1, i0:i1] = refl
             if want_classes:
@@ -547,7 +567,7 @@ class ProceduralTexture:
         hw = _F32(2.5) + _F32(2.5) * nz.unit(nz.rehash(h, 1))
         return np.where(present, hw, _F32(0.0))
 
-    def _evaluate(self, c: Coords, *, want_bands: bool):
+    def _evaluate(self, c: Coords, *, want_bands: bool, shading=None, cloud_irradiance: float = 1.0):
         shape = c.shape
         n = int(np.prod(shape))
         x, y = c.x, c.y
@@ -734,9 +754,14 @@ class ProceduralTexture:
             k = _SHADOW_K[b]
             if shadow is not None:
                 r *= _F32(1.0) - shadow * (_F32(1.0) - k)
+            if shading is not None:  # terrain shading lights the ground, not the clouds above it
+                r *= shading
             if cloud is not None:
                 r *= _F32(1.0) - _F32(0.85) * cshadow * (_F32(1.0) - k)
-                r += (_CLOUD_REFL[b] * cloud_bright - r) * cloud
+                top = _CLOUD_REFL[b] * cloud_bright
+                if shading is not None:
+                    top = top * _F32(cloud_irradiance)
+                r += (top - r) * cloud
             vis_nir.append(_clip01(r))
         out = np.empty((len(self.bands),) + shape, dtype=_F32)
         for o, name in enumerate(self.bands):
@@ -954,12 +979,16 @@ class OrthoTexture:
         b = a[lj]
         return b + (a[lj + 1] - b) * ty
 
-    def grid(self, x0_m: float, y0_m: float, texel_m: float, nx: int, ny: int) -> np.ndarray:
+    def grid(self, x0_m: float, y0_m: float, texel_m: float, nx: int, ny: int, *, ground_irradiance=None,
+             cloud_irradiance: float = 1.0) -> np.ndarray:
         """Reflectance on a texel grid (same convention as :meth:`ProceduralTexture.grid`).
+
+        ``ground_irradiance`` (ny, nx), when given, multiplies the result (an
+        orthoimage has no separate cloud layer: ``cloud_irradiance`` is unused).
 
         Returns
         -------
-        ndarray (nbands, ny, nx) float32, clipped to [0, 1].
+        ndarray (nbands, ny, nx) float32, clipped to [0, 1] (× irradiance when given).
         """
         _check_grid_args(x0_m, y0_m, texel_m, nx, ny)
         x = x0_m + (np.arange(int(nx)) + 0.5) * texel_m
@@ -983,7 +1012,13 @@ class OrthoTexture:
                         acc = term if acc is None else acc + term
                         wsum += wgt
                 out[k] = acc / _F32(wsum)
-        return _clip01(out)
+        out = _clip01(out)
+        if ground_irradiance is not None:
+            irr = np.asarray(ground_irradiance, dtype=_F32)
+            if irr.shape != (int(ny), int(nx)):
+                raise ValueError(f"ground_irradiance: expected shape ({int(ny)}, {int(nx)}), got {irr.shape}")
+            out *= irr[None]
+        return out
 
     def land_cover(self, x, y) -> np.ndarray:
         """Unknown for a real image: ``LandCover.UNKNOWN`` everywhere (uint8)."""
