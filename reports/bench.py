@@ -87,11 +87,22 @@ def bench_restore(*, scenario: str | None = None, lines: int | None = None, seed
     from reports.bench_integration import bench_integration
     out = {"differential_cnes_case": bench_integration(seed=seed)}
     out["end_to_end"] = bench_end_to_end(scenario=scenario or "phr_cmg", lines=lines)
+    # robustness: the same acquisition with 30 % of the scene under clouds
+    out["clouds_30"] = bench_end_to_end(scenario=scenario or "phr_cmg", lines=lines, tag="clouds_30",
+                                        overrides={"scene": {"texture": {"cloud_fraction": 0.3}}})
     return out
 
 
-def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | None = None) -> dict:
-    """Render (if needed), restore, and score against truth with the accuracy metric of DESIGN.md."""
+def _nan_runs(x) -> list:
+    """(first, stop) of the runs of NaN in a series."""
+    m = ~np.isfinite(np.asarray(x, dtype=np.float64))
+    d = np.diff(np.r_[0, m.astype(np.int8), 0])
+    return [(int(a), int(b)) for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1))]
+
+
+def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | None = None,
+                     overrides: dict | None = None, tag: str = "") -> dict:
+    """Render, restore, and score against truth with the accuracy metric of DESIGN.md."""
     from restore.pipeline import restore_run
     from simsat.product import read_truth
     from simsat.scenario import load_scenario
@@ -99,8 +110,12 @@ def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | 
 
     from .metrics import attitude_errors, attitude_misregistration
 
-    sc = load_scenario(scenario, overrides={"acquisition": {"lines": lines}} if lines else None)
-    rd = Path(run_dir) if run_dir else Path("runs") / (f"bench_{sc.name}" + (f"_{lines}" if lines else ""))
+    over = dict(overrides or {})
+    if lines:
+        over["acquisition"] = {"lines": lines}
+    sc = load_scenario(scenario, overrides=over or None)
+    rd = Path(run_dir) if run_dir else Path("runs") / (f"bench_{sc.name}" + (f"_{lines}" if lines else "") +
+                                                        (f"_{tag}" if tag else ""))
     t0 = _time.perf_counter()
     simulate(sc, rd, progress=False)
     t_render = _time.perf_counter() - t0
@@ -114,6 +129,8 @@ def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | 
     return {"scenario": sc.name, "lines": sc.acquisition.lines, "render_s": t_render, "restore_s": t_restore,
             "errors": errs, "misregistration": res.misregistration,
             "misregistration_from_attitude_error": attitude_misregistration(rest, truth), "timings": res.timings,
+            "overrides": overrides or {},
+            "unrestored_runs": {a: _nan_runs(rest[a].values) for a in ("roll", "pitch") if a in rest},
             "coverage": res.coverage, "run_dir": str(rd)}
 
 
@@ -148,6 +165,35 @@ def run_bench(what: str, *, scenario: str | None = None, out: str | None = None,
     atomic_write_json(result, path)
     result["_path"] = str(path)
     return result
+
+
+def _format_end_to_end(e: dict, title: str) -> list:
+    lines = [f"{title} on {e['scenario']} ({e['lines']} lines): restore {e['restore_s']:.1f} s, "
+             f"{e['timings']['lines_per_s']:.0f} lines/s, {e['timings']['matches_per_s']:.0f} matches/s"]
+    lines.append(f"  {'axis':6s} {'RMS px':>8s} {'99.7% px':>9s} {'RMS µrad':>9s} {'AOCS RMS px':>12s} {'gain':>6s} "
+                 f"{'coverage':>9s}")
+    for ax, v in e["errors"].items():
+        lines.append(f"  {ax:6s} {v['rms_px']:8.4f} {v['p997_px']:9.4f} {v['rms_urad']:9.4f} "
+                     f"{v['knowledge_rms_px']:12.4f} {v['knowledge_rms_px'] / max(v['rms_px'], 1e-12):6.1f} "
+                     f"{v['coverage'] * 100:8.1f}%")
+    runs = e.get("unrestored_runs", {}).get("roll")
+    if runs is not None:
+        lines.append(f"  lines without restoration (NaN): {sum(b - a for a, b in runs)} in {len(runs)} run(s) "
+                     + ", ".join(f"[{a}, {b})" for a, b in runs[:6]) + (" ..." if len(runs) > 6 else ""))
+    lines.append("  band-to-band misregistration, RMS px (line / column / 2-D):")
+    lines.append(f"  {'pair':6s} {'before':>20s} {'after, measured':>22s} {'matching noise':>16s} "
+                 f"{'after, noise removed':>22s} {'from attitude error':>22s}")
+    geo = e.get("misregistration_from_attitude_error", {})
+    nan = float("nan")
+    for k, v in e["misregistration"].items():
+        g = geo.get(k, {}).get("restored", {})
+        lines.append(f"  {k:6s} {v['before_line_px']:6.3f} {v['before_col_px']:6.3f} {v['before_px']:6.3f} "
+                     f"  {v['after_line_px']:6.3f} {v['after_col_px']:6.3f} {v['after_px']:6.3f}"
+                     f"  {v.get('after_noise_px', nan):14.3f}"
+                     f"  {v.get('after_line_signal_px', nan):6.3f} {v.get('after_col_signal_px', nan):6.3f} "
+                     f"{v.get('after_signal_px', nan):6.3f}"
+                     f"  {g.get('line_px', nan):6.3f} {g.get('col_px', nan):6.3f} {g.get('total_px', nan):6.3f}")
+    return lines
 
 
 def format_result(what: str, result: dict) -> str:
@@ -185,27 +231,10 @@ def format_result(what: str, result: dict) -> str:
                 return format_table(r)
             from reports.bench_integration import format_table
             lines.append(format_table(r["differential_cnes_case"]))
-            e = r["end_to_end"]
-            lines.append("")
-            lines.append(f"end to end on {e['scenario']} ({e['lines']} lines): restore {e['restore_s']:.1f} s, "
-                         f"{e['timings']['lines_per_s']:.0f} lines/s, {e['timings']['matches_per_s']:.0f} matches/s")
-            lines.append(f"  {'axis':6s} {'RMS px':>8s} {'99.7% px':>9s} {'RMS µrad':>9s} {'AOCS RMS px':>12s} {'gain':>6s} {'coverage':>9s}")
-            for ax, v in e["errors"].items():
-                lines.append(f"  {ax:6s} {v['rms_px']:8.4f} {v['p997_px']:9.4f} {v['rms_urad']:9.4f} "
-                             f"{v['knowledge_rms_px']:12.4f} {v['knowledge_rms_px'] / max(v['rms_px'], 1e-12):6.1f} "
-                             f"{v['coverage'] * 100:8.1f}%")
-            lines.append("  band-to-band misregistration, RMS px (line / column / 2-D):")
-            lines.append(f"  {'pair':6s} {'before':>20s} {'after, measured':>22s} {'matching noise':>16s} "
-                         f"{'after, noise removed':>22s} {'from attitude error':>22s}")
-            geo = e.get("misregistration_from_attitude_error", {})
-            for k, v in e["misregistration"].items():
-                g = geo.get(k, {}).get("restored", {})
-                lines.append(f"  {k:6s} {v['before_line_px']:6.3f} {v['before_col_px']:6.3f} {v['before_px']:6.3f} "
-                             f"  {v['after_line_px']:6.3f} {v['after_col_px']:6.3f} {v['after_px']:6.3f}"
-                             f"  {v['after_noise_px']:14.3f}"
-                             f"  {v['after_line_signal_px']:6.3f} {v['after_col_signal_px']:6.3f} {v['after_signal_px']:6.3f}"
-                             f"  {g.get('line_px', float('nan')):6.3f} {g.get('col_px', float('nan')):6.3f} "
-                             f"{g.get('total_px', float('nan')):6.3f}")
+            for key, title in (("end_to_end", "end to end"), ("clouds_30", "robustness, 30 % cloud cover:")):
+                if key in r:
+                    lines.append("")
+                    lines.extend(_format_end_to_end(r[key], title))
         except Exception as ex:  # pragma: no cover - formatting must never hide the JSON
             lines.append(json.dumps(r, indent=1, default=str)[:4000])
             lines.append(f"(formatting failed: {ex})")

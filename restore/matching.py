@@ -317,10 +317,13 @@ def _integer_search(a_z, a_norm, region, h, w):
     """
     n, nr, nc = region.shape
     kl, kc = nr - h + 1, nc - w + 1
-    num = np.empty((n, kl, kc), dtype=region.dtype)
-    for i in range(kl):
-        for j in range(kc):
-            np.einsum("nij,nij->n", a_z, region[:, i:i + h, j:j + w], out=num[:, i, j])
+    # numerators: every row of B at every column offset against every row of A, one
+    # batched matrix product (N, rows x offsets, w) @ (N, w, h); then the h diagonals
+    rows_b = np.lib.stride_tricks.sliding_window_view(region, w, axis=2).reshape(n, nr * kc, w)
+    x = np.matmul(rows_b, a_z.transpose(0, 2, 1)).reshape(n, nr, kc, h)
+    num = x[:, 0:kl, :, 0].copy()
+    for p in range(1, h):
+        num += x[:, p:p + kl, :, p]
     band = np.zeros((nc, kc), dtype=region.dtype)
     for j in range(kc):
         band[j:j + w, j] = 1.0
