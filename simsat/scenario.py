@@ -115,7 +115,10 @@ class Scenario:
     def texture(self):
         from . import terrain
         sec = self.section("scene").section("texture")
-        return terrain.texture_from_config(sec, base_dir=self.base_dir, seed=self.seed, sun=self.sun())
+        # synthesise only the bands the instrument has (texture synthesis is a large share of rendering)
+        bands = {d.band for d in self.instrument.detectors}
+        return terrain.texture_from_config(sec, base_dir=self.base_dir, seed=self.seed, sun=self.sun(),
+                                           default_bands=bands)
 
     def sun(self):
         from . import terrain

@@ -178,7 +178,8 @@ def sun_from_config(section: Section) -> Sun:
     return sun
 
 
-def texture_from_config(section: Section, *, base_dir, seed: int, sun: Sun | None = None):
+def texture_from_config(section: Section, *, base_dir, seed: int, sun: Sun | None = None,
+                        default_bands=None):
     """Ground reflectance texture from ``[scene.texture]``.
 
     Parameters
@@ -191,6 +192,9 @@ def texture_from_config(section: Section, *, base_dir, seed: int, sun: Sun | Non
         Scenario seed.
     sun : Sun, optional
         Sun for the procedural texture's building shadows (default ``Sun()``).
+    default_bands : sequence of str, optional
+        Bands to synthesise when the table has no ``bands`` key (e.g. the
+        instrument's bands); default all of ``BAND_NAMES``.
 
     Returns
     -------
@@ -201,6 +205,8 @@ def texture_from_config(section: Section, *, base_dir, seed: int, sun: Sun | Non
     bands = section.strings("bands", None, choices=BAND_NAMES)
     if bands is not None and len(set(bands)) != len(bands):
         raise section.error("bands", f"repeated band in {list(bands)}")
+    if bands is None and default_bands is not None:
+        bands = tuple(b for b in BAND_NAMES if b in set(default_bands))
     if kind == "procedural":
         sun = sun or Sun()
         kw = dict(
