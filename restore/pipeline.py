@@ -49,6 +49,7 @@ class RestorationSettings:
     points_per_line: int = 24
     window: tuple = (3, 31)
     search: tuple = (3, 3)
+    pilot_search: tuple = (8, 8)
     match_method: str = "ncc"
     min_quality: float = 0.6
     axes: tuple = ("roll", "pitch")
@@ -88,6 +89,8 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
         raise sec.error("window_columns", f"must be odd, got {wc}")
     s.window = (wl, wc)
     s.search = (sec.integer("search_lines", s.search[0], ge=0, le=64), sec.integer("search_columns", s.search[1], ge=0, le=64))
+    s.pilot_search = (sec.integer("pilot_search_lines", s.pilot_search[0], ge=0, le=64),
+                      sec.integer("pilot_search_columns", s.pilot_search[1], ge=0, le=64))
     s.match_method = sec.string("match_method", s.match_method, choices=("ncc", "phase"))
     s.min_quality = sec.number("min_quality", s.min_quality, ge=-1, le=1)
     s.axes = tuple(sec.strings("axes", list(s.axes), choices=AXES))
@@ -239,6 +242,71 @@ class _Progress:
             self.bar.close()
 
 
+#: pilot matching: every how many lines, and at most how many points per line
+_PILOT_LINE_STEP = 2
+_PILOT_POINTS = 6
+
+
+def pilot_shift(img_a, img_b, lines_a, cols_a, pred_l, pred_c, n_lines: int, settings: RestorationSettings):
+    """Per-line shift of band B with respect to the knowledge prediction [px], from a sparse wide search.
+
+    The knowledge prediction can be off by more than the matcher's search
+    half-range where the jitter differential peaks (beats of the CMG lines).
+    A pilot pass matches a few points of every other line with the wide
+    ``settings.pilot_search``; the median shift of each line (interpolated
+    between lines) re-centres the search of every point, so that the
+    search area follows the predictor's actual accuracy while staying small
+    (few false peaks on periodic textures).
+
+    Returns
+    -------
+    (shift_lines, shift_cols) : ndarray (n_lines,) each
+        Zero where nothing could be measured (and everywhere when the pilot
+        search is not wider than the search).
+    """
+    from .matching import match_points, support_margin
+
+    zero = (np.zeros(n_lines), np.zeros(n_lines))
+    ps = settings.pilot_search
+    if lines_a.size == 0 or (ps[0] <= settings.search[0] and ps[1] <= settings.search[1]):
+        return zero
+    ps = (max(ps[0], settings.search[0]), max(ps[1], settings.search[1]))
+    li = np.rint(lines_a).astype(np.int64)
+    # a few points spread along each pilot line (every k-th of its points in column order)
+    order = np.lexsort((cols_a, li))
+    srt = li[order]
+    starts = np.r_[0, np.flatnonzero(srt[1:] != srt[:-1]) + 1]
+    counts = np.diff(np.r_[starts, srt.size])
+    rank = np.arange(srt.size) - np.repeat(starts, counts)
+    step = np.maximum(np.repeat(counts, counts) // _PILOT_POINTS, 1)
+    keep = np.zeros(li.size, dtype=bool)
+    keep[order] = (rank % step == 0) & (srt % _PILOT_LINE_STEP == 0)
+    ml, mc = support_margin(window=settings.window, search=ps)
+    nb = img_b.shape
+    keep &= (pred_l > ml) & (pred_l < nb[0] - 1 - ml) & (pred_c > mc) & (pred_c < nb[1] - 1 - mc)
+    if not keep.any():
+        return zero
+    m = match_points(img_a, img_b, lines_a[keep], cols_a[keep], pred_l[keep], pred_c[keep], window=settings.window,
+                     search=ps, method="ncc", min_quality=settings.min_quality)
+    ok = np.asarray(m.valid, bool)
+    if ok.sum() < 2:
+        return zero
+    lk = li[keep][ok]
+    out = []
+    for d in (m.line_b[ok] - pred_l[keep][ok], m.col_b[ok] - pred_c[keep][ok]):
+        med = np.full(n_lines, np.nan)
+        o = np.lexsort((d, lk))
+        l_s, d_s = lk[o], d[o]
+        st = np.r_[0, np.flatnonzero(l_s[1:] != l_s[:-1]) + 1]
+        en = np.r_[st[1:], l_s.size]
+        good = (en - st) >= 2  # a line's shift needs two agreeing points at least
+        mid = 0.5 * (d_s[(st + en - 1) // 2] + d_s[(st + en) // 2])
+        med[l_s[st[good]]] = mid[good]
+        have = np.flatnonzero(np.isfinite(med))
+        out.append(np.interp(np.arange(n_lines), have, med[have]) if have.size else np.zeros(n_lines))
+    return out[0], out[1]
+
+
 def _grid_points_fallback(image, *, method, per_line, window, margin, line_mask, search=None):
     n_lines, n_cols = image.shape
     ml, mc = margin
@@ -344,8 +412,11 @@ def match_pair(product: Product, ahead: str, behind: str, settings: RestorationS
     inside = np.isfinite(pl) & np.isfinite(pc) & (pl > ml) & (pl < n_lines - 1 - ml) & (pc > mc) & \
         (pc < img_b.shape[1] - 1 - mc)
     lines_a, cols_a, pl, pc = lines_a[inside], cols_a[inside], pl[inside], pc[inside]
-    m = match_points(img_a, img_b, lines_a, cols_a, pl, pc, window=settings.window, search=settings.search,
-                     method=settings.match_method, min_quality=settings.min_quality)
+    # centre each point's search on the pilot's per-line shift (the residuals stay relative to pl, pc)
+    sh_l, sh_c = pilot_shift(img_a, img_b, lines_a, cols_a, pl, pc, n_lines, settings)
+    li = np.clip(np.rint(lines_a).astype(np.int64), 0, n_lines - 1)
+    m = match_points(img_a, img_b, lines_a, cols_a, pl + sh_l[li], pc + sh_c[li], window=settings.window,
+                     search=settings.search, method=settings.match_method, min_quality=settings.min_quality)
     return PairData(name=name, ahead=ahead, behind=behind, tau_s=tau, line_a=lines_a, col_a=cols_a,
                     meas_line_b=m.line_b, meas_col_b=m.col_b, quality=m.quality, valid=np.asarray(m.valid, bool),
                     pred_line_b=pl, pred_col_b=pc, std_line=np.asarray(m.std_line, float),

@@ -106,3 +106,56 @@ def test_half_the_scene_under_clouds_still_restores_with_gaps_flagged(tmp_path):
     assert 0.2 < res.coverage["roll"] <= 1.0
     errs = attitude_errors(ds, read_truth(d))
     assert errs["roll"]["rms_px"] < errs["roll"]["knowledge_rms_px"]
+
+
+def test_pilot_shift_recentres_searches_beyond_the_search_range():
+    """Band B shifted by up to 6 px per line (twice the search range): the pilot finds the shift."""
+    from scipy.ndimage import gaussian_filter, map_coordinates
+
+    from restore.matching import match_points
+    from restore.pipeline import RestorationSettings, pilot_shift
+
+    rng = np.random.default_rng(5)
+    n_lines, n_cols = 400, 300
+    a = gaussian_filter(rng.standard_normal((n_lines + 40, n_cols + 40)), 1.2)
+    lines = np.arange(n_lines, dtype=float)
+    sl = 6.0 * np.sin(2 * np.pi * lines / 200.0)      # along-track shift, px
+    sc = 5.0 * np.cos(2 * np.pi * lines / 260.0)      # across-track shift, px
+    L, C = np.meshgrid(lines, np.arange(n_cols, dtype=float), indexing="ij")
+    img_a = a[20:20 + n_lines, 20:20 + n_cols]
+    # line l of B shows A's ground shifted by (sl(l), sc(l)): B(l, c) = A(l - sl(l), c - sc(l))
+    img_b = map_coordinates(a, [L + 20 - sl[:, None], C + 20 - sc[:, None]], order=5, mode="nearest")
+    la, ca = np.meshgrid(np.arange(20, n_lines - 20, dtype=float), np.linspace(30, n_cols - 31, 12), indexing="ij")
+    la, ca = la.ravel(), ca.ravel()
+    s = RestorationSettings()
+    sh_l, sh_c = pilot_shift(img_a, img_b, la, ca, la.copy(), ca.copy(), n_lines, s)
+    # A's line l is seen in B at line l_b with l_b - sl(l_b) = l: shifts sl(l_b), sc(l_b)
+    inner = slice(30, n_lines - 30)
+    lb = np.interp(lines, lines - sl, lines)
+    exp_l = np.interp(lb, lines, sl)
+    exp_c = np.interp(lb, lines, sc)
+    assert np.max(np.abs(sh_l[inner] - exp_l[inner])) < 0.5
+    assert np.max(np.abs(sh_c[inner] - exp_c[inner])) < 0.5
+    # the full matching centred on it succeeds where the knowledge-centred one fails
+    li = np.rint(la).astype(int)
+    plain = match_points(img_a, img_b, la, ca, la, ca, window=s.window, search=s.search)
+    piloted = match_points(img_a, img_b, la, ca, la + sh_l[li], ca + sh_c[li], window=s.window, search=s.search)
+    big = np.abs(exp_l[li]) > 4.0
+    assert plain.valid[big].mean() < 0.3
+    assert piloted.valid[big].mean() > 0.9
+    # on the right peak (the shift varies by 0.2 px/line here, so the 3-line window is stretched:
+    # sub-pixel accuracy is tested in test_matching)
+    ok = piloted.valid
+    np.testing.assert_allclose((piloted.line_b - la)[ok], exp_l[li][ok], atol=0.15)
+    np.testing.assert_allclose((piloted.col_b - ca)[ok], exp_c[li][ok], atol=0.15)
+
+
+def test_pilot_is_off_when_not_wider_than_the_search():
+    from restore.pipeline import RestorationSettings, pilot_shift
+
+    s = RestorationSettings()
+    s.pilot_search = (2, 2)
+    z = np.zeros((50, 50))
+    sh_l, sh_c = pilot_shift(z, z, np.array([10.0]), np.array([10.0]), np.array([10.0]), np.array([10.0]), 50, s)
+    assert not sh_l.any() and not sh_c.any()
+    assert restoration_settings({"pilot_search_lines": 0, "pilot_search_columns": 0}).pilot_search == (0, 0)
