@@ -197,7 +197,7 @@ def highpass_nan(signal: np.ndarray, *, dt: float, cutoff_hz: float) -> np.ndarr
     """Remove frequencies below ``cutoff_hz`` from a gappy signal (NaN kept as NaN).
 
     Subtracts a NaN-aware Gaussian-smoothed copy (normalised convolution) whose
-    −3 dB point is at ``cutoff_hz``.
+    −3 dB point is at ``cutoff_hz``; beyond the ends is treated as missing.
     """
     from scipy.ndimage import gaussian_filter1d
 
@@ -209,8 +209,10 @@ def highpass_nan(signal: np.ndarray, *, dt: float, cutoff_hz: float) -> np.ndarr
         return x.copy()
     # Gaussian transfer exp(-2π²σ²f²) = 1/√2 at f_c  ⇒ σ = sqrt(ln 2) / (2π f_c)
     sigma = np.sqrt(np.log(2.0)) / (2 * np.pi * cutoff_hz) / dt
-    num = gaussian_filter1d(np.where(m, x, 0.0), sigma, mode="nearest")
-    den = gaussian_filter1d(m.astype(np.float64), sigma, mode="nearest")
+    # outside the record is missing data, like a gap (normalised convolution): padding with
+    # the edge sample would put its jitter into the low-pass estimate near the ends
+    num = gaussian_filter1d(np.where(m, x, 0.0), sigma, mode="constant", cval=0.0)
+    den = gaussian_filter1d(m.astype(np.float64), sigma, mode="constant", cval=0.0)
     low = num / np.maximum(den, 1e-12)
     out = x - low
     out[~m] = np.nan
