@@ -37,6 +37,31 @@ from reports import report_plots as RP
 __all__ = ["make_run_report"]
 
 DPI = 100
+#: widest embedded thumbnail (px); the full-resolution PNG is linked beside the page
+THUMB_WIDTH = 900
+
+
+def _thumbnail(png: bytes, *, max_width: int = THUMB_WIDTH, colors: int = 128) -> bytes:
+    """A smaller PNG to embed in the page: at most ``max_width`` wide, adaptive palette.
+
+    Keeps the HTML small (a few hundred kB) whatever the run length; the
+    full PNG is the link target. Falls back to the original bytes if Pillow
+    cannot read them.
+    """
+    try:
+        from PIL import Image
+
+        im = Image.open(io.BytesIO(png)).convert("RGB")
+        w, h = im.size
+        if w > max_width:
+            im = im.resize((max_width, max(1, round(h * max_width / w))), Image.LANCZOS)
+        q = im.quantize(colors=colors, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+        out = io.BytesIO()
+        q.save(out, format="PNG", optimize=True)
+        data = out.getvalue()
+        return data if len(data) < len(png) else png
+    except Exception:  # pragma: no cover - an unreadable PNG is embedded as it is
+        return png
 URAD = 1e6
 
 
@@ -105,7 +130,7 @@ class _Page:
         data = buf.getvalue()
         P.atomic_write_bytes(self.out_dir / name, data)
         self.files.append(name)
-        b64 = base64.b64encode(data).decode("ascii")
+        b64 = base64.b64encode(_thumbnail(data)).decode("ascii")
         style = f' style="max-width:{width}px"' if width else ""
         self.parts.append(f'<figure><a href="{_e(name)}"><img alt="{_e(name)}" src="data:image/png;base64,{b64}"{style}>'
                           f'</a><figcaption>{caption}</figcaption></figure>')
@@ -113,7 +138,7 @@ class _Page:
     def png_file(self, path: Path, caption: str):
         data = path.read_bytes()
         self.files.append(path.name)
-        b64 = base64.b64encode(data).decode("ascii")
+        b64 = base64.b64encode(_thumbnail(data)).decode("ascii")
         self.parts.append(f'<figure><a href="{_e(path.name)}"><img alt="{_e(path.name)}" '
                           f'src="data:image/png;base64,{b64}"></a><figcaption>{caption}</figcaption></figure>')
 
