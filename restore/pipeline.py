@@ -344,6 +344,10 @@ def _shifted(x: np.ndarray, t_idx: np.ndarray) -> np.ndarray:
     return out
 
 
+#: passes of the time-synchronisation correction (the first with the lsq estimate)
+_SYNC_PASSES = 1
+
+
 def _integrate_time_sync(diffs, taus, lags, te, *, method, settings, sigmas=None) -> np.ndarray:
     """Integrate differentials whose actual lag varies line by line (time synchronisation).
 
@@ -351,7 +355,8 @@ def _integrate_time_sync(diffs, taus, lags, te, *, method, settings, sigmas=None
     θ(t + τ_j + λ_j(t)) − θ(t) = D_j(t)). Other methods assume constant lags:
     the differentials are first brought back to the nominal lag with the
     ``lsq`` estimate θ̂ — D_j − [θ̂(t + τ_j + λ_j) − θ̂(t + τ_j)] — then
-    integrated by the chosen method.
+    integrated by the chosen method; the correction is then recomputed with
+    that estimate (``_SYNC_PASSES`` in all).
     """
     from .integration import integrate
     from .integration.lsq import integrate_lsq
@@ -363,12 +368,15 @@ def _integrate_time_sync(diffs, taus, lags, te, *, method, settings, sigmas=None
     if method != "lsq":
         n = len(diffs[0])
         idx = np.arange(n, dtype=np.float64)
-        corrected = []
-        for d, tau, lag in zip(diffs, taus, lags):
-            base = idx + tau / te
-            corrected.append(d - (_shifted(est, base + lag / te) - _shifted(est, base)))
-        est = np.asarray(integrate(corrected, taus, te, method=method, **settings.integration_options),
-                         dtype=np.float64)
+        # fixed point: the correction of the lags is recomputed with the method's own
+        # (better) estimate; the lag error left is second order in the estimate's error
+        for _ in range(_SYNC_PASSES):
+            corrected = []
+            for d, tau, lag in zip(diffs, taus, lags):
+                base = idx + tau / te
+                corrected.append(d - (_shifted(est, base + lag / te) - _shifted(est, base)))
+            est = np.asarray(integrate(corrected, taus, te, method=method, **settings.integration_options),
+                             dtype=np.float64)
     if hp > 0:
         # the AOCS knows the low frequencies: keep only what the images add
         est = highpass_nan(est, dt=te, cutoff_hz=hp)

@@ -191,10 +191,10 @@ def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=No
         Where ``sum_j |G_j|²`` (noise-weighted) is below this fraction of its
         maximum over the neighbouring ``2 detection_hz + dilate_hz``, i.e. in
         the notches at the blind frequencies ``n / tau`` (``n >= 1``; not the
-        low-frequency end), the PSD is interpolated linearly from the nearest
-        well-observed frequencies
-        instead of being divided by ~0 (a strong line's leakage would
-        otherwise make it explode there).
+        low-frequency end), the PSD is set to the smaller of its values at the
+        notch's two edges instead of being divided by ~0 (a strong line's
+        leakage would otherwise make it explode there, and a line's skirt on
+        one side would make the filter amplify the noise in the notch).
 
     Returns
     -------
@@ -244,11 +244,19 @@ def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=No
     # Near blind frequencies (and 0 Hz) the ratio (P - nu) / |G|² is meaningless (leakage
     # and noise divided by ~0): bridge those bins linearly from well-observed neighbours.
     info = (g2 * (nu.min() / nu)[:, None]).sum(0)
-    Lw = max(1, int(round((2 * detection_hz + dilate_hz) / df))) | 1
+    # compared with the best observed frequencies over half the shortest pair's
+    # notch spacing (1 / tau_min): the notches' whole depth, not just their bottom
+    Lw = max(1, int(round(max(2 * detection_hz + dilate_hz, 0.5 / taus.min()) / df))) | 1
     poor = (info < min_gain * maximum_filter1d(info, Lw)) & (f >= 0.5 / taus.max())
     if poor.any() and (~poor).any():
-        good = np.flatnonzero(~poor)
-        S[poor] = np.interp(np.flatnonzero(poor), good, S[good], left=0.0, right=0.0)
+        # each notch gets the smaller of its two edge values: a line's skirt on one side
+        # must not raise the prior where the data cannot tell signal from noise (that
+        # would amplify the noise, |G| ~ 0), and nothing there can be restored anyway
+        edges = np.diff(np.r_[0, poor.astype(np.int8), 0])
+        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            left = S[a - 1] if a > 0 else 0.0
+            right = S[b] if b < S.size else 0.0
+            S[a:b] = min(left, right)
     S[0] = 0.0
     if n_fft % 2 == 0:
         S[-1] = 0.0
