@@ -32,7 +32,7 @@ import numpy as np
 from simsat.config import ScenarioError, Section
 from simsat.product import Product, atomic_write_dataset, clamped_attitude, read_product
 
-from .synthesis import AXES, fill_short_gaps, highpass_nan, instant_synthesis, window_compensation
+from .synthesis import AXES, drop_sparse, fill_short_gaps, highpass_nan, instant_synthesis, window_compensation
 
 __all__ = ["RestorationSettings", "restoration_settings", "restore_product", "restore_run", "RestorationResult",
            "RestorationError", "PairData"]
@@ -517,7 +517,8 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
                 taus.append(p.tau_s)
                 lags.append(_line_lag(p, n_lines, settings.max_gap_fill_lines) * te)
                 for k, a in enumerate(AXES):
-                    d = fill_short_gaps(res.diff[:, k], max_gap=settings.max_gap_fill_lines)
+                    d = drop_sparse(res.diff[:, k], half_window=max(settings.max_gap_fill_lines, 1))
+                    d = fill_short_gaps(d, max_gap=settings.max_gap_fill_lines)
                     if settings.compensate_window:
                         d = window_compensation(d, window_lines=settings.window[0])
                     diffs[a].append(d)

@@ -219,6 +219,28 @@ def highpass_nan(signal: np.ndarray, *, dt: float, cutoff_hz: float) -> np.ndarr
     return out
 
 
+def drop_sparse(signal: np.ndarray, *, half_window: int, min_fraction: float = 0.5) -> np.ndarray:
+    """NaN the samples whose neighbourhood is mostly gaps.
+
+    A sample is kept when at least ``min_fraction`` of the ``2 half_window + 1``
+    samples centred on it are finite. Isolated differentials in a stretch of
+    gaps (the frayed edge of a cloud, a scatter of water) rest on few points and
+    would let the integration return lines it cannot really constrain; without
+    them the stretch is one long gap, reported as not estimated.
+    """
+    from scipy.ndimage import uniform_filter1d
+
+    x = np.asarray(signal, dtype=np.float64).copy()
+    if half_window <= 0:
+        return x
+    m = np.isfinite(x)
+    frac = uniform_filter1d(m.astype(np.float64), 2 * int(half_window) + 1, mode="constant", cval=0.0)
+    # at the record ends, judge on the part of the window inside the record
+    inside = uniform_filter1d(np.ones(x.size), 2 * int(half_window) + 1, mode="constant", cval=0.0)
+    x[m & (frac < min_fraction * inside - 1e-12)] = np.nan
+    return x
+
+
 def fill_short_gaps(signal: np.ndarray, *, max_gap: int) -> np.ndarray:
     """Fill runs of at most ``max_gap`` NaN samples by cubic interpolation of their neighbours.
 

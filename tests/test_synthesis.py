@@ -112,3 +112,20 @@ def test_lsq_integration_with_per_sample_lags_recovers_a_quasi_harmonic_signal()
     e0 = (est0 - ref)[m]
     e0 -= e0.mean()
     assert np.sqrt(np.mean(e0 ** 2)) > 2 * np.sqrt(np.mean(e ** 2))
+
+
+def test_drop_sparse_removes_isolated_samples_in_gappy_stretches():
+    from restore.synthesis import drop_sparse
+
+    x = np.arange(200, dtype=float)
+    x[60:140] = np.nan
+    x[[70, 71, 90, 120]] = 1.0          # a scatter of samples inside a long gap
+    x[10] = np.nan                      # a single gap in a dense stretch
+    out = drop_sparse(x, half_window=8)
+    assert np.isnan(out[[70, 71, 90, 120]]).all()
+    # dense stretches are untouched, including next to a single gap and at the record ends
+    keep = np.isfinite(x) & ~np.isin(np.arange(200), [70, 71, 90, 120])
+    np.testing.assert_array_equal(out[keep], x[keep])
+    assert np.isfinite(out[:10]).all() and np.isfinite(out[-5:]).all()
+    # half_window 0: unchanged
+    np.testing.assert_array_equal(drop_sparse(x, half_window=0), x)
