@@ -984,26 +984,30 @@ def true_differentials(run: RunData, axis: str, *, previous_estimate=None, lags=
 
 
 def measured_differentials(run: RunData, axis: str) -> list:
-    """The run's differentials of ``axis`` per pair, as integrated (high-pass of the settings applied)."""
-    te = run.line_period_s
+    """The run's differentials of ``axis`` per pair, as integrated (the high-pass applies to the estimate)."""
     meas = np.asarray(run.restoration[f"diff_{axis}"].values, dtype=np.float64)
-    return [_highpass(m, te, run.settings) for m in meas]
+    return [m for m in meas]
 
 
 def axis_integration(run: RunData, axis: str, integrate: Callable) -> dict:
     """:func:`freeze_integration` of the run's method on the measured differentials of ``axis`` (cached)."""
     key = ("freeze", axis, id(integrate))
     if key not in run._cache:
-        run._cache[key] = freeze_integration(integrate, measured_differentials(run, axis), run.taus,
-                                             run.line_period_s, method=str(run.restoration.attrs.get("method", ""))
-                                             or None, options=dict(run.settings.get("integration_options") or {}))
+        fz = freeze_integration(integrate, measured_differentials(run, axis), run.taus,
+                                run.line_period_s, method=str(run.restoration.attrs.get("method", ""))
+                                or None, options=dict(run.settings.get("integration_options") or {}))
+        if fz["theta"] is not None:  # as the pipeline: the high-pass applies to the estimate
+            fz["theta"] = _highpass(fz["theta"], run.line_period_s, run.settings)
+        run._cache[key] = fz
     return run._cache[key]
 
 
 def _integrate_axis(integrate, diffs, run: RunData, method, options):
+    """Integrate like the pipeline: the differentials as they are, the high-pass of the settings on the result."""
     te = run.line_period_s
-    d = [_highpass(np.asarray(x, dtype=np.float64), te, run.settings) for x in diffs]
-    return np.asarray(integrate(d, list(run.taus), te, method=method, **options), dtype=np.float64)
+    d = [np.asarray(x, dtype=np.float64) for x in diffs]
+    est = np.asarray(integrate(d, list(run.taus), te, method=method, **options), dtype=np.float64)
+    return _highpass(est, te, run.settings)
 
 
 def _stats_row(component: str, axis: str, e, ifov: float, note: str = "") -> dict:
