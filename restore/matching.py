@@ -319,6 +319,7 @@ def _integer_search(a_z, a_norm, region, h, w):
     kl, kc = nr - h + 1, nc - w + 1
     # numerators: every row of B at every column offset against every row of A, one
     # batched matrix product (N, rows x offsets, w) @ (N, w, h); then the h diagonals
+    region = np.ascontiguousarray(region)  # (a view into the B patches: one compact copy first)
     rows_b = np.lib.stride_tricks.sliding_window_view(region, w, axis=2).reshape(n, nr * kc, w)
     x = np.matmul(rows_b, a_z.transpose(0, 2, 1)).reshape(n, nr, kc, h)
     num = x[:, 0:kl, :, 0].copy()
