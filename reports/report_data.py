@@ -629,6 +629,9 @@ def _options_for_pairs(options: dict, idx: Sequence[int], n_pairs: int) -> dict:
         v = out.get(key)
         if v is not None and np.ndim(v) == 1 and len(v) == n_pairs:
             out[key] = np.asarray(v, dtype=np.float64)[list(idx)]
+    w = out.get("weights")
+    if w is not None and len(w) == n_pairs:  # one array per pair
+        out["weights"] = [w[i] for i in idx]
     return out
 
 
@@ -983,6 +986,16 @@ def true_differentials(run: RunData, axis: str, *, previous_estimate=None, lags=
     return dtrue, prev
 
 
+def _line_weights(run: RunData):
+    """The pipeline's relative weight of each pair's line (matched points, at least the minimum), or None."""
+    rest = run.restoration
+    if rest is None or "diff_points" not in rest:
+        return None
+    pts = np.asarray(rest["diff_points"].values, dtype=np.float64)
+    floor = float(run.settings.get("min_points_per_line") or 3)
+    return [np.where(p >= floor, p, floor) for p in pts]
+
+
 def measured_differentials(run: RunData, axis: str) -> list:
     """The run's differentials of ``axis`` per pair, as integrated (the high-pass applies to the estimate)."""
     meas = np.asarray(run.restoration[f"diff_{axis}"].values, dtype=np.float64)
@@ -993,9 +1006,13 @@ def axis_integration(run: RunData, axis: str, integrate: Callable) -> dict:
     """:func:`freeze_integration` of the run's method on the measured differentials of ``axis`` (cached)."""
     key = ("freeze", axis, id(integrate))
     if key not in run._cache:
+        method = str(run.restoration.attrs.get("method", "")) or None
+        opts = dict(run.settings.get("integration_options") or {})
+        w = _line_weights(run)
+        if (method or "wiener") == "wiener" and w is not None and "weights" not in opts:
+            opts["weights"] = w  # as the pipeline: lines weigh by their matched points
         fz = freeze_integration(integrate, measured_differentials(run, axis), run.taus,
-                                run.line_period_s, method=str(run.restoration.attrs.get("method", ""))
-                                or None, options=dict(run.settings.get("integration_options") or {}))
+                                run.line_period_s, method=method, options=opts)
         if fz["theta"] is not None:  # as the pipeline: the high-pass applies to the estimate
             fz["theta"] = _highpass(fz["theta"], run.line_period_s, run.settings)
         run._cache[key] = fz

@@ -348,7 +348,7 @@ def _shifted(x: np.ndarray, t_idx: np.ndarray) -> np.ndarray:
 _SYNC_PASSES = 1
 
 
-def _integrate_time_sync(diffs, taus, lags, te, *, method, settings, sigmas=None) -> np.ndarray:
+def _integrate_time_sync(diffs, taus, lags, te, *, method, settings, sigmas=None, weights=None) -> np.ndarray:
     """Integrate differentials whose actual lag varies line by line (time synchronisation).
 
     ``lsq`` models the per-line lags exactly (each line is an equation
@@ -377,8 +377,10 @@ def _integrate_time_sync(diffs, taus, lags, te, *, method, settings, sigmas=None
             for d, tau, lag in zip(diffs, taus, lags):
                 base = idx + tau / te
                 corrected.append(d - (_shifted(est, base + lag / te) - _shifted(est, base)))
-            est = np.asarray(integrate(corrected, taus, te, method=method, **settings.integration_options),
-                             dtype=np.float64)
+            opts = dict(settings.integration_options)
+            if method == "wiener" and weights is not None and "weights" not in opts:
+                opts["weights"] = weights  # lines resting on more matched points weigh more
+            est = np.asarray(integrate(corrected, taus, te, method=method, **opts), dtype=np.float64)
     if hp > 0:
         # the AOCS knows the low frequencies: keep only what the images add
         est = highpass_nan(est, dt=te, cutoff_hz=hp)
@@ -512,12 +514,16 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
                 sm_it = product.sensor_model(attitude=clamped_attitude(_series(t_line, cur)))
             diffs = {a: [] for a in AXES}
             sigmas = {a: [] for a in AXES}
+            points = []
             taus = []
             lags = []
             for p in pairs:
                 res = _synthesise(product, p, sm_it, settings, n_lines, recompute_sens=(it == 0))
                 taus.append(p.tau_s)
                 lags.append(_line_lag(p, n_lines, settings.max_gap_fill_lines) * te)
+                # relative weight of each line's differential: its matched points (filled lines: the minimum)
+                points.append(np.where(res.n_points >= settings.min_points_per_line, res.n_points,
+                                       settings.min_points_per_line).astype(np.float64))
                 for k, a in enumerate(AXES):
                     d = drop_sparse(res.diff[:, k], half_window=max(settings.max_gap_fill_lines, 1))
                     d = fill_short_gaps(d, max_gap=settings.max_gap_fill_lines)
@@ -532,7 +538,7 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
                     raise RestorationError(f"{product.path}: no line could be synthesised on {a} "
                                            "(too few good matches per line)")
                 inc = _integrate_time_sync(diffs[a], taus, lags, te, method=method, settings=settings,
-                                           sigmas=sigmas[a])
+                                           sigmas=sigmas[a], weights=points)
                 valid_est[a] = np.isfinite(inc)
                 estimate[a] = np.where(np.isfinite(inc), np.nan_to_num(estimate[a]) + inc, np.nan)
             t_int += _time.perf_counter() - ti

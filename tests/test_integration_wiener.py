@@ -114,3 +114,26 @@ def test_wiener_long_lag_many_blind_frequencies():
     diffs, truth = make(theta, 3000, taus=[tau], sigma=0.01, seed=5)
     est = integrate(diffs, [tau], DT, method="wiener")
     assert np.std(err(est, truth)) < 0.02
+
+
+def test_wiener_per_sample_weights_follow_the_noise():
+    """Half the samples ten times noisier (in variance): weighting them by 1/variance helps."""
+    n = 4000
+    t = np.arange(n) * DT
+    rng = np.random.default_rng(3)
+    truth = THETA(t)
+    var = np.where((np.arange(n) // 50) % 2 == 0, 0.05 ** 2, 10 * 0.05 ** 2)
+    diffs = [THETA(t + tau) - truth + np.sqrt(var) * rng.standard_normal(n) for tau in TAUS]
+    plain = integrate_wiener(diffs, TAUS, DT)
+    weighted = integrate_wiener(diffs, TAUS, DT, weights=[1.0 / var] * 3)
+    e_plain = np.sqrt(np.mean(err(plain, truth) ** 2))
+    e_weighted = np.sqrt(np.mean(err(weighted, truth) ** 2))
+    assert e_weighted < 0.85 * e_plain
+    # scale-free: weights are relative (to the conjugate-gradient tolerance, 1e-7 relative)
+    again = integrate_wiener(diffs, TAUS, DT, weights=[7.0 / var] * 3)
+    np.testing.assert_allclose(again, weighted, atol=1e-6 * np.abs(truth).max())
+    # equal weights are no weights
+    same = integrate_wiener(diffs, TAUS, DT, weights=[np.ones(n)] * 3)
+    np.testing.assert_allclose(same, plain, atol=1e-6 * np.abs(truth).max())
+    with pytest.raises(ValueError, match="weights"):
+        integrate_wiener(diffs, TAUS, DT, weights=[np.ones(n)] * 2)

@@ -115,6 +115,12 @@ def integrate_wiener_fft(diffs, taus, dt, *, noise_std=None, psd=None, pad_fract
         As for :func:`integrate_inverse`.
     spectrum_options : dict, keyword-only
         Passed to :func:`~restore.integration.spectrum.estimate_spectrum`.
+    weights : sequence of arrays, keyword-only
+        Relative weight of each sample, one array per pair (e.g. the number of
+        matched points behind each line's differential): the noise variance of
+        sample ``n`` of pair ``j`` is ``noise_std_j² / weights_j[n]``, with the
+        weights scaled to mean 1 over the pair's valid samples (``noise_std``
+        stays the pair's typical level). Non-finite or <= 0 = no weight.
 
     Returns
     -------
@@ -159,10 +165,12 @@ class WienerResult:
         self.residual = residual
 
 
-def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=None):
+def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=None, rel_weights=None):
     """Solve the MAP normal equations on the periodic grid of length ``m``.
 
-    ``theta0`` (length ``m``, optional) warm-starts the iteration.
+    ``theta0`` (length ``m``, optional) warm-starts the iteration;
+    ``rel_weights`` (pair, sample), optional, scales each sample's inverse
+    noise variance ``1 / sigma_j²`` (mean 1 over the valid samples).
     Returns (theta on the record, theta on the grid, predicted differentials,
     iterations, residual).
     """
@@ -170,6 +178,8 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
     c = np.sqrt(S / dt)
     kop = c[None, :] * (np.exp(2j * np.pi * freq[None, :] * taus[:, None]) - 1)
     w = np.where(valid, 1.0 / sigma[:, None] ** 2, 0.0)
+    if rel_weights is not None:
+        w = w * rel_weights
     dz = np.where(valid, D, 0.0)
 
     def normal(z: np.ndarray) -> np.ndarray:
@@ -216,7 +226,7 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
 def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction: float = 0.5,
                      tol: float = 1e-7, maxiter: int = 300, refine: int | None = None,
                      max_gap_s: float | None = None, spectrum_options: dict | None = None,
-                     return_details: bool = False):
+                     weights=None, return_details: bool = False):
     """Exact multi-pair Wiener (MAP) integration on the finite record, by conjugate gradients.
 
     With gaps, the first PSD estimate comes from the gap-free segments only
@@ -244,6 +254,12 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         Longest unobserved interior run returned (s); default the longest lag.
     spectrum_options : dict, keyword-only
         Passed to :func:`~restore.integration.spectrum.estimate_spectrum`.
+    weights : sequence of arrays, keyword-only
+        Relative weight of each sample, one array per pair (e.g. the number of
+        matched points behind each line's differential): the noise variance of
+        sample ``n`` of pair ``j`` is ``noise_std_j² / weights_j[n]``, with the
+        weights scaled to mean 1 over the pair's valid samples (``noise_std``
+        stays the pair's typical level). Non-finite or <= 0 = no weight.
     return_details : bool, keyword-only
         Return a :class:`WienerResult` instead of the array.
 
@@ -256,6 +272,17 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
     p, n = D.shape
     if int(maxiter) < 1:
         raise ValueError(f"maxiter: must be >= 1, got {maxiter}")
+    rel = None
+    if weights is not None:
+        rel = np.asarray([np.asarray(x, dtype=np.float64) for x in weights]) if len(weights) else None
+        if rel is None or rel.shape != D.shape:
+            raise ValueError(f"weights: expected {p} arrays of {n} samples, got shape "
+                             f"{None if rel is None else rel.shape}")
+        ok = valid & np.isfinite(rel) & (rel > 0)
+        rel = np.where(ok, rel, 0.0)
+        for j in range(p):
+            mj = rel[j][valid[j]].mean() if valid[j].any() else 0.0
+            rel[j] = rel[j] / mj if mj > 0 else rel[j]
     tol = check_positive("tol", tol)
     if refine is None:
         refine = 2 if valid.mean() < 0.99 else 0
@@ -272,7 +299,7 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         if m % 2 == 0:
             S[-1] = 0.0  # keep the operator exactly self-adjoint on real signals
         full, grid, pred, it, res = _cg_solve(D, valid, taus, dt, spec.freq, S, spec.noise_std,
-                                              m, tol=tol, maxiter=maxiter, theta0=grid)
+                                              m, tol=tol, maxiter=maxiter, theta0=grid, rel_weights=rel)
         if k == passes:
             break
         sigma = noise_std
