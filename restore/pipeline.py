@@ -61,6 +61,7 @@ class RestorationSettings:
     method: str | None = None
     integration_options: dict = field(default_factory=dict)
     iterations: int = 1
+    pair_order: str = "fused"
     anchor_star_tracker: bool = True
     correct_images: bool = True
     correction_column_step: int = 16
@@ -110,6 +111,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.integration_options = dict(opts.data)
     opts.finish(extra_allowed=opts.data.keys())
     s.iterations = sec.integer("iterations", s.iterations, ge=1, le=10)
+    s.pair_order = sec.string("pair_order", s.pair_order, choices=("fused", "best_first"))
     s.anchor_star_tracker = sec.boolean("anchor_star_tracker", s.anchor_star_tracker)
     s.correct_images = sec.boolean("correct_images", s.correct_images)
     s.correction_column_step = sec.integer("correction_column_step", s.correction_column_step, ge=1)
@@ -477,7 +479,11 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
     t_all = _time.perf_counter()
     timings = {}
     pairs_ab = _resolve_pairs(product, settings)
-    n_stages = len(pairs_ab) + settings.iterations + 2
+    # best_first (patent claims 9-11): the best-correlated pair alone first, then the next ones
+    # folded in one per iteration, re-predicting with the refined attitude, then all of them
+    # until the increment is immaterial (at most `iterations` passes after the last pair)
+    n_iter = settings.iterations if settings.pair_order == "fused" else len(pairs_ab) - 1 + settings.iterations
+    n_stages = len(pairs_ab) + n_iter + 2
     bar = _Progress(progress, n_stages)
     t_line = product.time
     n_lines = t_line.size
@@ -505,8 +511,16 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
         method = settings.method or DEFAULT_METHOD
         t_syn = t_int = 0.0
         valid_est = {a: np.ones(n_lines, dtype=bool) for a in AXES}
-        for it in range(settings.iterations):
+        # correlation ranking of the pairs: valid matches x their mean quality
+        score = [float(np.count_nonzero(p.valid)) * float(np.nanmean(p.quality[p.valid])) if p.valid.any() else 0.0
+                 for p in pairs]
+        ranked = sorted(range(len(pairs)), key=lambda j: -score[j])
+        for it in range(n_iter):
             ts = _time.perf_counter()
+            if settings.pair_order == "best_first":
+                used = [pairs[j] for j in sorted(ranked[:it + 1])]
+            else:
+                used = pairs
             if it == 0:
                 sm_it = sm
             else:
@@ -517,8 +531,8 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
             points = []
             taus = []
             lags = []
-            for p in pairs:
-                res = _synthesise(product, p, sm_it, settings, n_lines, recompute_sens=(it == 0))
+            for p in used:
+                res = _synthesise(product, p, sm_it, settings, n_lines, recompute_sens=(p.sens is None or it == 0))
                 taus.append(p.tau_s)
                 lags.append(_line_lag(p, n_lines, settings.max_gap_fill_lines) * te)
                 # relative weight of each line's differential: its matched points (filled lines: the minimum)
@@ -533,6 +547,7 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
                     sigmas[a].append(res.sigma[:, k])
             t_syn += _time.perf_counter() - ts
             ti = _time.perf_counter()
+            change = 0.0
             for a in settings.axes:
                 if all(np.all(~np.isfinite(d)) for d in diffs[a]):
                     raise RestorationError(f"{product.path}: no line could be synthesised on {a} "
@@ -540,9 +555,16 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
                 inc = _integrate_time_sync(diffs[a], taus, lags, te, method=method, settings=settings,
                                            sigmas=sigmas[a], weights=points)
                 valid_est[a] = np.isfinite(inc)
-                estimate[a] = np.where(np.isfinite(inc), np.nan_to_num(estimate[a]) + inc, np.nan)
+                new_est = np.where(np.isfinite(inc), np.nan_to_num(estimate[a]) + inc, np.nan)
+                if np.isfinite(new_est).any():
+                    change = max(change, float(np.sqrt(np.nanmean(inc ** 2)) /
+                                               max(np.sqrt(np.nanmean(new_est ** 2)), 1e-300)))
+                estimate[a] = new_est
             t_int += _time.perf_counter() - ti
-            bar.step(f"iteration {it + 1}")
+            bar.step(f"iteration {it + 1}" + (f" ({len(used)} pair{'s' * (len(used) > 1)})"
+                                              if settings.pair_order == "best_first" else ""))
+            if settings.pair_order == "best_first" and len(used) == len(pairs) and it > 0 and change < 0.02:
+                break  # converged: the last pass changed the estimate by < 2 % RMS
         timings["synthesis_s"] = t_syn
         timings["integration_s"] = t_int
         for a in AXES:

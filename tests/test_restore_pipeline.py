@@ -1,4 +1,5 @@
 """Restoration end to end on the `tiny` scenario, robustness and error messages."""
+import json
 import shutil
 import subprocess
 import sys
@@ -166,3 +167,20 @@ def test_pilot_is_off_when_not_wider_than_the_search():
     sh_l, sh_c = pilot_shift(z, z, np.array([10.0]), np.array([10.0]), np.array([10.0]), np.array([10.0]), 50, s)
     assert not sh_l.any() and not sh_c.any()
     assert restoration_settings({"pilot_search_lines": 0, "pilot_search_columns": 0}).pilot_search == (0, 0)
+
+
+def test_best_first_pair_order_folds_pairs_in_and_beats_the_knowledge(tiny_restored, tmp_path):
+    d, fused = tiny_restored
+    run = tmp_path / "bf"
+    run.mkdir()
+    for name in ("product.nc", "truth.nc", "run.json"):
+        shutil.copy(d / name, run / name)
+    res = restore_run(run, overrides={"pair_order": "best_first", "correct_images": False}, progress=False)
+    ds = xr.load_dataset(run / "restoration.nc")
+    errs = attitude_errors(ds, read_truth(run))
+    for a in ("roll", "pitch"):
+        assert errs[a]["rms_px"] < 0.5 * errs[a]["knowledge_rms_px"], errs[a]
+        assert res.coverage[a] == pytest.approx(fused.coverage[a], abs=0.05)
+    assert json.loads(ds.attrs["settings"])["pair_order"] == "best_first"
+    with pytest.raises(ScenarioError, match="pair_order"):
+        restoration_settings({"pair_order": "worst_first"})
