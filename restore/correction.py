@@ -128,19 +128,14 @@ def per_line_shift_rms(lines, res_l, res_c, n_lines: int, *, cols=None, weights_
     w_l, w_c = wts[0][ok], wts[1][ok]
     cols = np.arange(lines.size, dtype=np.float64) if cols is None else np.asarray(cols, dtype=np.float64)[ok]
     # two interleaved halves of each line's points (rank by column, odd / even)
-    order = np.lexsort((cols, lines))
-    srt = lines[order]
-    starts = np.r_[0, np.flatnonzero(srt[1:] != srt[:-1]) + 1]
-    rank = np.arange(srt.size) - np.repeat(starts, np.diff(np.r_[starts, srt.size]))
-    half = np.empty(lines.size, dtype=np.int64)
-    half[order] = rank % 2
+    half = rank_within_line(lines, cols)[0] % 2
     # mismatches are not misregistration: reject points beyond 3 robust σ of the
     # residuals around the median of their line (the rule of the instant
     # synthesis), taken per half so that the halves' noises stay independent
     key = 2 * lines + half
     keep = np.ones(lines.size, dtype=bool)
     for r in (res_l, res_c):
-        med = _line_median(key, r, keep, 2 * n_lines)
+        med = line_median(key, r, keep, 2 * n_lines)
         dev = r - med[key]
         s = 1.4826 * np.nanmedian(np.abs(dev[keep]))
         keep &= np.abs(dev) <= 3 * max(s, 1e-3)
@@ -181,7 +176,21 @@ def per_line_shift_rms(lines, res_l, res_c, n_lines: int, *, cols=None, weights_
     return out
 
 
-def _line_median(lines, values, ok, n_lines):
+def rank_within_line(lines, cols):
+    """Rank of each point among the points of its line, by column; and its line's point count."""
+    lines = np.asarray(lines)
+    order = np.lexsort((np.asarray(cols), lines))
+    srt = lines[order]
+    starts = np.r_[0, np.flatnonzero(srt[1:] != srt[:-1]) + 1]
+    counts = np.diff(np.r_[starts, srt.size])
+    rank = np.empty(lines.size, dtype=np.int64)
+    count = np.empty(lines.size, dtype=np.int64)
+    rank[order] = np.arange(srt.size) - np.repeat(starts, counts)
+    count[order] = np.repeat(counts, counts)
+    return rank, count
+
+
+def line_median(lines, values, ok, n_lines):
     """Median of ``values`` per line (NaN where a line has no value)."""
     med = np.full(n_lines, np.nan)
     li = lines[ok]

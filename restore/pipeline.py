@@ -274,15 +274,11 @@ def pilot_shift(img_a, img_b, lines_a, cols_a, pred_l, pred_c, n_lines: int, set
         return zero
     ps = (max(ps[0], settings.search[0]), max(ps[1], settings.search[1]))
     li = np.rint(lines_a).astype(np.int64)
+    from .correction import line_median, rank_within_line
+
     # a few points spread along each pilot line (every k-th of its points in column order)
-    order = np.lexsort((cols_a, li))
-    srt = li[order]
-    starts = np.r_[0, np.flatnonzero(srt[1:] != srt[:-1]) + 1]
-    counts = np.diff(np.r_[starts, srt.size])
-    rank = np.arange(srt.size) - np.repeat(starts, counts)
-    step = np.maximum(np.repeat(counts, counts) // _PILOT_POINTS, 1)
-    keep = np.zeros(li.size, dtype=bool)
-    keep[order] = (rank % step == 0) & (srt % _PILOT_LINE_STEP == 0)
+    rank, count = rank_within_line(li, cols_a)
+    keep = (rank % np.maximum(count // _PILOT_POINTS, 1) == 0) & (li % _PILOT_LINE_STEP == 0)
     ml, mc = support_margin(window=settings.window, search=ps)
     nb = img_b.shape
     keep &= (pred_l > ml) & (pred_l < nb[0] - 1 - ml) & (pred_c > mc) & (pred_c < nb[1] - 1 - mc)
@@ -294,16 +290,11 @@ def pilot_shift(img_a, img_b, lines_a, cols_a, pred_l, pred_c, n_lines: int, set
     if ok.sum() < 2:
         return zero
     lk = li[keep][ok]
+    few = np.bincount(lk, minlength=n_lines)[:n_lines] < 2  # a line's shift needs two points at least
     out = []
     for d in (m.line_b[ok] - pred_l[keep][ok], m.col_b[ok] - pred_c[keep][ok]):
-        med = np.full(n_lines, np.nan)
-        o = np.lexsort((d, lk))
-        l_s, d_s = lk[o], d[o]
-        st = np.r_[0, np.flatnonzero(l_s[1:] != l_s[:-1]) + 1]
-        en = np.r_[st[1:], l_s.size]
-        good = (en - st) >= 2  # a line's shift needs two agreeing points at least
-        mid = 0.5 * (d_s[(st + en - 1) // 2] + d_s[(st + en) // 2])
-        med[l_s[st[good]]] = mid[good]
+        med = line_median(lk, d, np.ones(d.size, dtype=bool), n_lines)
+        med[few] = np.nan
         have = np.flatnonzero(np.isfinite(med))
         out.append(np.interp(np.arange(n_lines), have, med[have]) if have.size else np.zeros(n_lines))
     return out[0], out[1]
@@ -346,10 +337,6 @@ def _shifted(x: np.ndarray, t_idx: np.ndarray) -> np.ndarray:
     return out
 
 
-#: passes of the time-synchronisation correction (the first with the lsq estimate)
-_SYNC_PASSES = 1
-
-
 def _integrate_time_sync(diffs, taus, lags, te, *, method, settings, sigmas=None, weights=None) -> np.ndarray:
     """Integrate differentials whose actual lag varies line by line (time synchronisation).
 
@@ -357,8 +344,9 @@ def _integrate_time_sync(diffs, taus, lags, te, *, method, settings, sigmas=None
     θ(t + τ_j + λ_j(t)) − θ(t) = D_j(t)). Other methods assume constant lags:
     the differentials are first brought back to the nominal lag with the
     ``lsq`` estimate θ̂ — D_j − [θ̂(t + τ_j + λ_j) − θ̂(t + τ_j)] — then
-    integrated by the chosen method; the correction is then recomputed with
-    that estimate (``_SYNC_PASSES`` in all).
+    integrated by the chosen method. (Recomputing the correction with that
+    estimate was tried: it feeds its errors at the common blind frequency
+    back, and is worse.)
     """
     from .integration import integrate
     from .integration.lsq import integrate_lsq
@@ -372,17 +360,14 @@ def _integrate_time_sync(diffs, taus, lags, te, *, method, settings, sigmas=None
     if method != "lsq":
         n = len(diffs[0])
         idx = np.arange(n, dtype=np.float64)
-        # fixed point: the correction of the lags is recomputed with the method's own
-        # (better) estimate; the lag error left is second order in the estimate's error
-        for _ in range(_SYNC_PASSES):
-            corrected = []
-            for d, tau, lag in zip(diffs, taus, lags):
-                base = idx + tau / te
-                corrected.append(d - (_shifted(est, base + lag / te) - _shifted(est, base)))
-            opts = dict(settings.integration_options)
-            if method == "wiener" and weights is not None and "weights" not in opts:
-                opts["weights"] = weights  # lines resting on more matched points weigh more
-            est = np.asarray(integrate(corrected, taus, te, method=method, **opts), dtype=np.float64)
+        corrected = []
+        for d, tau, lag in zip(diffs, taus, lags):
+            base = idx + tau / te
+            corrected.append(d - (_shifted(est, base + lag / te) - _shifted(est, base)))
+        opts = dict(settings.integration_options)
+        if method == "wiener" and weights is not None and "weights" not in opts:
+            opts["weights"] = weights  # lines resting on more matched points weigh more
+        est = np.asarray(integrate(corrected, taus, te, method=method, **opts), dtype=np.float64)
     if hp > 0:
         # the AOCS knows the low frequencies: keep only what the images add
         est = highpass_nan(est, dt=te, cutoff_hz=hp)
