@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["resampling_grid", "correct_bands", "misregistration", "per_line_shift_rms"]
+__all__ = ["resampling_grid", "correct_bands", "misregistration", "per_line_shift_rms", "rank_within_line", "line_median"]
 
 
 def resampling_grid(product, band: str, restored, *, column_step: int = 16):
