@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["error_stats", "attitude_errors", "truth_at", "attitude_misregistration"]
+__all__ = ["error_stats", "attitude_errors", "truth_at", "attitude_misregistration", "misregistration_floor"]
 
 AXES = ("roll", "pitch", "yaw")
 
@@ -123,3 +123,40 @@ def attitude_misregistration(restoration, truth) -> dict:
             row[which] = vals
         out[str(name)] = row
     return out
+
+
+def misregistration_floor(product, truth, pairs, settings) -> dict:
+    """Image-measured misregistration of bands corrected with the *true* attitude (a control).
+
+    The bands are resampled exactly as :func:`restore.correction.correct_bands`
+    does, but with the true attitude of ``truth.nc`` instead of the restored
+    one, and measured by :func:`restore.correction.misregistration` with the
+    same points, matcher and weights as the restoration's own "after"
+    figure. A perfect restoration would measure this: what it shows is the
+    floor of the image-based measurement (cross-band matching noise and
+    resampling), not misregistration left by the attitude. Benchmarks and
+    reports only: it reads the truth.
+
+    Parameters
+    ----------
+    product : simsat.product.Product
+    truth : xarray.Dataset
+        ``truth.nc`` (``time``, ``roll``, ``pitch``, ``yaw`` [rad]).
+    pairs : list of restore.pipeline.PairData
+        The restoration's matched pairs (their points are re-used).
+    settings : restore.pipeline.RestorationSettings
+
+    Returns
+    -------
+    dict
+        ``{pair: {after_px, after_line_px, after_col_px, after_noise_px,
+        after_signal_px, ...}}`` as :func:`restore.correction.misregistration`.
+    """
+    from restore.correction import correct_bands, misregistration
+    from simsat.attitude import AttitudeSeries
+
+    series = AttitudeSeries(time=np.asarray(truth["time"].values, dtype=np.float64),
+                            **{a: np.asarray(truth[a].values, dtype=np.float64) for a in AXES})
+    used = {b for p in pairs for b in (p.ahead, p.behind)}
+    corrected = correct_bands(product, restored=series, column_step=settings.correction_column_step, bands=used)
+    return misregistration(product, corrected, pairs, settings)

@@ -1345,7 +1345,63 @@ def misregistration_rows(run: RunData) -> list:
         g = geo.get(r["pair"], {}).get("restored", {})
         for k in ("line_px", "col_px", "total_px"):
             r[f"attitude_{k}"] = float(g.get(k, float("nan")))
+    floor = misregistration_with_true_attitude(run) if rows else {}
+    for r in rows:
+        f = floor.get(r["pair"], {})
+        for k in ("px", "line_px", "col_px"):
+            r[f"true_attitude_{k}"] = float(f.get(f"after_{k}", float("nan")))
     return rows
+
+
+def misregistration_with_true_attitude(run: RunData) -> dict:
+    """The "after" measurement repeated on bands corrected with the *true* attitude (needs truth).
+
+    Same points (the restoration's valid matches, from ``restoration.nc``),
+    same matcher settings: what a perfect restoration would measure, i.e. the
+    floor of the image-based measurement. ``{}`` without truth, without
+    corrected images, or when it cannot be computed (said in ``run.notes``).
+    See :func:`reports.metrics.misregistration_floor`.
+    """
+    rest = run.restoration
+    if run.truth is None or rest is None or not run.has_corrected or "match_pair" not in rest:
+        return {}
+    if "true_attitude_floor" in run._cache:
+        return run._cache["true_attitude_floor"]
+    from types import SimpleNamespace
+
+    from restore.pipeline import RestorationSettings
+    from simsat.product import ProductError, read_product
+
+    from .metrics import misregistration_floor
+
+    out = {}
+    try:
+        product = read_product(run.run_dir)
+        d = RestorationSettings()
+        st = run.settings
+        settings = SimpleNamespace(window=tuple(st.get("window", d.window)), search=tuple(st.get("search", d.search)),
+                                   match_method=st.get("match_method", d.match_method),
+                                   min_quality=float(st.get("min_quality", d.min_quality)),
+                                   correction_column_step=int(st.get("correction_column_step",
+                                                                     d.correction_column_step)))
+        idx = np.asarray(rest["match_pair"].values)
+        names = np.asarray(rest["pair"].values).astype(str)[idx] if np.issubdtype(idx.dtype, np.integer) \
+            else idx.astype(str)
+        pairs = []
+        for name in dict.fromkeys(names):
+            m = names == name
+            ahead, behind = name.split("/")
+            v = lambda k: np.asarray(rest[k].values, dtype=np.float64)[m]  # noqa: E731
+            pairs.append(SimpleNamespace(name=name, ahead=ahead, behind=behind, line_a=v("match_line_a"),
+                                         col_a=v("match_col_a"), meas_line_b=v("match_meas_line_b"),
+                                         meas_col_b=v("match_meas_col_b"),
+                                         valid=np.asarray(rest["match_valid"].values, bool)[m],
+                                         std_line=None, std_col=None))
+        out = misregistration_floor(product, run.truth, pairs, settings)
+    except (ProductError, KeyError, ValueError, OSError) as ex:
+        run.notes.append(f"misregistration with the true attitude not computed: {ex}")
+    run._cache["true_attitude_floor"] = out
+    return out
 
 
 # =============================================================================

@@ -39,9 +39,10 @@ def resampling_grid(product, band: str, restored, *, column_step: int = 16):
     return out_l, out_c
 
 
-def correct_bands(product, *, restored, valid=None, column_step: int = 16):
-    """All bands resampled to the knowledge geometry (cubic spline interpolation).
+def correct_bands(product, *, restored, valid=None, column_step: int = 16, bands=None):
+    """Bands resampled to the knowledge geometry (cubic spline interpolation).
 
+    ``bands`` limits the correction to those band names (default: all).
     Returns an xarray Dataset with ``image_<band>`` float32 (NaN outside the
     raw image or where the attitude was not restored).
     """
@@ -50,6 +51,8 @@ def correct_bands(product, *, restored, valid=None, column_step: int = 16):
 
     data = {}
     for name in product.band_names:
+        if bands is not None and name not in bands:
+            continue
         img = product.image(name)
         rl, rc = resampling_grid(product, name, restored, column_step=column_step)
         inside = (rl >= 0) & (rl <= img.shape[0] - 1) & (rc >= 0) & (rc <= img.shape[1] - 1)

@@ -66,6 +66,28 @@ def test_misregistration_drops_after_correction(tiny_restored):
         assert v["after_px"] < 0.5 * v["before_px"], (name, v)
 
 
+def test_true_attitude_correction_is_the_floor_the_restoration_reaches(tiny_restored):
+    # the control of the benchmark: bands corrected with the true attitude, measured the same way
+    from reports.metrics import misregistration_floor
+    from simsat.product import read_product
+
+    d, res = tiny_restored
+    floor = misregistration_floor(read_product(d), read_truth(d), res.pairs, res.settings)
+    assert set(floor) == set(res.misregistration)
+    for name, v in res.misregistration.items():
+        f = floor[name]
+        # a perfect attitude removes most of the jitter misregistration ...
+        assert f["after_px"] < 0.5 * v["before_px"], (name, f, v)
+        # ... and the restored one leaves about as little (same points, same measurement)
+        assert v["after_px"] < 1.3 * f["after_px"], (name, f, v)
+    # the report repeats the control from the run directory alone (restoration.nc's matches)
+    from reports.report_data import load_run, misregistration_rows
+
+    rows = {r["pair"]: r for r in misregistration_rows(load_run(d))}
+    for name, f in floor.items():
+        assert rows[name]["true_attitude_px"] == pytest.approx(f["after_px"], rel=0.02)
+
+
 def test_flat_product_ends_with_a_clear_message(tiny_restored, tmp_path):
     d, _ = tiny_restored
     ds = xr.load_dataset(d / "product.nc")
