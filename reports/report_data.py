@@ -1384,12 +1384,10 @@ def misregistration_with_true_attitude(run: RunData) -> dict:
                                    min_quality=float(st.get("min_quality", d.min_quality)),
                                    correction_column_step=int(st.get("correction_column_step",
                                                                      d.correction_column_step)))
-        idx = np.asarray(rest["match_pair"].values)
-        names = np.asarray(rest["pair"].values).astype(str)[idx] if np.issubdtype(idx.dtype, np.integer) \
-            else idx.astype(str)
+        mp = np.asarray(rest["match_pair"].values)  # index into run.pairs, as in match_density
         pairs = []
-        for name in dict.fromkeys(names):
-            m = names == name
+        for j, name in enumerate(run.pairs):
+            m = mp == j
             ahead, behind = name.split("/")
             v = lambda k: np.asarray(rest[k].values, dtype=np.float64)[m]  # noqa: E731
             pairs.append(SimpleNamespace(name=name, ahead=ahead, behind=behind, line_a=v("match_line_a"),
