@@ -15,7 +15,9 @@ error. Two cases:
     0.85, gain 1.3), shifted, with noise.
 
 Every method sees the same windows. Ours (``ncc`` and ``phase`` of
-:func:`restore.matching.match_points`, one batched call) read band B around
+:func:`restore.matching.match_points`, one call for all points: ``ours-ncc``
+is the compiled kernel on every thread Numba has, ``ours-ncc-1thread`` the
+same on one thread, ``ours-ncc-numpy`` the batched NumPy reference) read band B around
 the prediction (search area and interpolation support), as in the processing
 line; ``skimage.registration.phase_cross_correlation(upsample_factor=100)``
 and ``cv2.phaseCorrelate`` get, one call per point, the A window and the B
@@ -36,7 +38,10 @@ from restore.matching import match_points, support_margin
 
 __all__ = ["synthetic_pairs", "bench_matching", "format_table", "METHODS"]
 
-METHODS = ("ours-ncc", "ours-phase", "skimage", "opencv")
+METHODS = ("ours-ncc", "ours-ncc-1thread", "ours-ncc-numpy", "ours-phase", "skimage", "opencv")
+#: how each of our methods calls :func:`restore.matching.match_points`: (method, backend, threads)
+_OURS = {"ours-ncc": ("ncc", "compiled", None), "ours-ncc-1thread": ("ncc", "compiled", 1),
+         "ours-ncc-numpy": ("ncc", "numpy", None), "ours-phase": ("phase", "numpy", None)}
 CASES = ("same", "cross")
 _PAD = 3  # extra margin of each synthetic patch (px)
 
@@ -165,11 +170,13 @@ def _run(method, data, window, search, repeat):
     valid = np.ones(la.size, dtype=bool)
     best = np.inf
     for _ in range(repeat):
-        if method.startswith("ours"):
-            t0 = time.perf_counter()
-            res = match_points(img_a, img_b, la, ca, la, ca, window=window, search=search,
-                               method=method.split("-")[1])
-            best = min(best, time.perf_counter() - t0)
+        if method in _OURS:
+            meth, backend, threads = _OURS[method]
+            with _numba_threads(threads):
+                t0 = time.perf_counter()
+                res = match_points(img_a, img_b, la, ca, la, ca, window=window, search=search,
+                                   method=meth, backend=backend)
+                best = min(best, time.perf_counter() - t0)
             est = np.stack([res.line_b - la, res.col_b - ca], axis=1)
             valid = res.valid
         elif method == "skimage":
@@ -195,6 +202,35 @@ def _run(method, data, window, search, repeat):
         else:
             raise ValueError(f"methods: unknown method {method!r}, expected a subset of {METHODS}")
     return est, valid, best
+
+
+class _numba_threads:
+    """Context manager: run the compiled kernel on ``n`` threads (``None``: all)."""
+
+    def __init__(self, n):
+        self.n = n
+
+    def __enter__(self):
+        if self.n is not None:
+            import numba
+
+            self.prev = numba.get_num_threads()
+            numba.set_num_threads(self.n)
+
+    def __exit__(self, *exc):
+        if self.n is not None:
+            import numba
+
+            numba.set_num_threads(self.prev)
+
+
+def compile_seconds(window=(3, 31), search=(2, 2)) -> float:
+    """Time of the first call of the compiled matcher in this process (s): JIT or cache load."""
+    data = synthetic_pairs(seed=0, n=4, window=window, search=search)
+    t0 = time.perf_counter()
+    match_points(data["image_a"], data["image_b"], data["lines"], data["cols"], data["lines"], data["cols"],
+                 window=window, search=search, backend="compiled")
+    return time.perf_counter() - t0
 
 
 def _stats(err, valid, shift, n_bins=10):
@@ -260,8 +296,13 @@ def bench_matching(*, seed=0, n=2000, window=(3, 31), search=(2, 2), max_shift=1
     if int(skimage_n) != skimage_n or skimage_n < 1:
         raise ValueError(f"skimage_n: must be an integer >= 1, got {skimage_n}")
     window, search = tuple(window), tuple(search)
+    import numba
+
     out = {"config": {"seed": seed, "n": n, "window": window, "search": search,
-                      "max_shift": max_shift, "noise": noise, "repeat": repeat}, "results": {}}
+                      "max_shift": max_shift, "noise": noise, "repeat": repeat,
+                      "threads": numba.get_num_threads(),
+                      # first call of the compiled kernel: JIT compilation, or loading it from numba's cache
+                      "compile_s": compile_seconds(window, search)}, "results": {}}
     for case in cases:
         data = synthetic_pairs(seed=seed, n=n, window=window, search=search, max_shift=max_shift,
                                case=case, noise=noise)
@@ -290,15 +331,16 @@ def format_table(result) -> str:
     """Plain-text table of a :func:`bench_matching` result."""
     cfg = result["config"]
     head = (f"window {cfg['window'][0]}x{cfg['window'][1]}, shifts U(±{cfg['max_shift']}) px, "
-            f"noise {cfg['noise']} of texture std, n={cfg['n']}, seed={cfg['seed']}")
+            f"noise {cfg['noise']} of texture std, n={cfg['n']}, seed={cfg['seed']}; "
+            f"compiled kernel on {cfg.get('threads', '?')} threads (first call {cfg.get('compile_s', float('nan')):.1f} s)")
     cols = ("case", "method", "valid", "µs/match", "bias_l", "std_l", "lock_l", "bias_c", "std_c", "lock_c")
-    rows = [head, "  ".join(f"{c:>10}" for c in cols)]
+    rows = [head, "  ".join(f"{c:>16}" if c == "method" else f"{c:>10}" for c in cols)]
     for case, res in result["results"].items():
         for m, r in res.items():
             vals = [case, m, f"{r['valid']:.3f}", f"{r['us_per_match']:.1f}",
                     f"{r['line']['bias']:+.4f}", f"{r['line']['std']:.4f}", f"{r['line']['locking']:.4f}",
                     f"{r['col']['bias']:+.4f}", f"{r['col']['std']:.4f}", f"{r['col']['locking']:.4f}"]
-            rows.append("  ".join(f"{v:>10}" for v in vals))
+            rows.append("  ".join(f"{v:>16}" if i == 1 else f"{v:>10}" for i, v in enumerate(vals)))
     return "\n".join(rows)
 
 

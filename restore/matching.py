@@ -69,6 +69,7 @@ __all__ = [
 ]
 
 _METHODS = ("ncc", "phase")
+_BACKENDS = ("auto", "compiled", "numpy")
 #: points per batch: keeps the stacks in cache and bounds memory
 _CHUNK = 2048
 #: antisymmetric gradient filter of the A window (Gauss-Newton Jacobian), 1/px
@@ -406,6 +407,7 @@ def match_points(
     order: int = 4,
     max_iter: int = 12,
     tol: float = 5e-3,
+    backend: str = "auto",
 ) -> MatchResult:
     """Match points of band A in band B to sub-pixel accuracy.
 
@@ -442,6 +444,12 @@ def match_points(
         of its own estimated standard deviation. The last update is applied
         and the secant steps converge superlinearly, so the error left is
         typically ten times smaller.
+    backend : {"auto", "compiled", "numpy"}, keyword-only
+        ``"compiled"`` runs the ``"ncc"`` method as a Numba kernel, one point
+        per iteration of a parallel loop (:mod:`restore._ncc_kernel`);
+        ``"numpy"`` runs the batched NumPy implementation, the reference the
+        tests compare the kernel with. ``"auto"`` picks the kernel for
+        ``"ncc"``; ``"phase"`` always runs in NumPy.
 
     Returns
     -------
@@ -474,6 +482,10 @@ def match_points(
         raise ValueError(f"max_iter: must be an integer >= 1, got {max_iter}")
     if not float(tol) > 0:
         raise ValueError(f"tol: must be > 0, got {tol}")
+    if backend not in _BACKENDS:
+        raise ValueError(f"backend: expected one of {_BACKENDS}, got {backend!r}")
+    if backend == "compiled" and method != "ncc":
+        raise ValueError(f"backend: the compiled kernel implements method 'ncc' only, got method {method!r}")
     images = []
     for name, img in (("image_a", image_a), ("image_b", image_b)):
         img = np.asarray(img)
@@ -495,10 +507,29 @@ def match_points(
         f, i = np.zeros(0), np.zeros(0, dtype=np.int64)
         return MatchResult(line_b=f, col_b=f.copy(), quality=f.copy(), valid=np.zeros(0, dtype=bool),
                            flags=i, std_line=f.copy(), std_col=f.copy())
+    if method == "ncc" and backend != "numpy":
+        return _match_compiled(*images, *pts, h=h, w=w, sl=sl, sc=sc, min_quality=float(min_quality),
+                               max_std=max_std, order=int(order), max_iter=int(max_iter), tol=float(tol))
     opts = dict(h=h, w=w, sl=sl, sc=sc, method=method, min_quality=float(min_quality),
                 max_std=max_std, order=int(order), max_iter=int(max_iter), tol=float(tol))
     parts = [_match_chunk(*images, *(v[i:i + _CHUNK] for v in pts), **opts) for i in range(0, n, _CHUNK)]
     return MatchResult(**{f.name: np.concatenate([p[f.name] for p in parts]) for f in fields(MatchResult)})
+
+
+def _match_compiled(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, min_quality, max_std, order, max_iter,
+                    tol) -> MatchResult:
+    """:func:`match_points` ``"ncc"`` through the compiled kernel."""
+    from ._ncc_kernel import match_ncc
+
+    def native(img):  # the kernel is compiled for C-ordered float32 and float64 images
+        dtype = img.dtype if img.dtype in (np.float32, np.float64) else np.float64
+        return np.ascontiguousarray(img, dtype=dtype)
+
+    out = match_ncc(native(image_a), native(image_b), la, ca, pl, pc, h, w, sl, sc, order, max_iter, tol,
+                    min_quality, -1.0 if max_std is None else float(max_std))
+    flags = out[:, 3].astype(np.int64)
+    return MatchResult(line_b=out[:, 0].copy(), col_b=out[:, 1].copy(), quality=out[:, 2].copy(), valid=flags == 0,
+                       flags=flags, std_line=out[:, 4].copy(), std_col=out[:, 5].copy())
 
 
 def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_quality, max_std,

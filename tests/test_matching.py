@@ -36,9 +36,10 @@ def cross():
     return synthetic_pairs(seed=2, n=2000, case="cross", noise=0.02, max_shift=1.5)
 
 
-@pytest.mark.parametrize("method, rms_max, lock_max", [("ncc", 0.012, 0.006), ("phase", 0.04, 0.015)])
-def test_same_band_known_shifts(same, method, rms_max, lock_max):
-    res = _match(same, window=(3, 31), search=(2, 2), method=method)
+@pytest.mark.parametrize("method, backend, rms_max, lock_max", [
+    ("ncc", "compiled", 0.012, 0.006), ("ncc", "numpy", 0.012, 0.006), ("phase", "numpy", 0.04, 0.015)])
+def test_same_band_known_shifts(same, method, backend, rms_max, lock_max):
+    res = _match(same, window=(3, 31), search=(2, 2), method=method, backend=backend)
     assert res.valid.mean() > 0.98
     err = _errors(res, same)[res.valid]
     for ax, key in enumerate(("shift_lines", "shift_cols")):
@@ -91,7 +92,8 @@ def test_fractional_points_and_predictions(same):
     assert np.sqrt(np.mean((res.col_b - tc)[res.valid] ** 2)) < 0.015
 
 
-def test_flags():
+@pytest.mark.parametrize("backend", ["compiled", "numpy"])
+def test_flags(backend):
     data = synthetic_pairs(seed=3, n=200, case="same", noise=0.02, max_shift=0.0, search=(4, 4))
     a, b = data["image_a"].copy(), data["image_b"].copy()
     la, ca = data["lines"].copy(), data["cols"].copy()
@@ -102,7 +104,7 @@ def test_flags():
     b[int(la[2]) + 2, int(ca[2]) + 5] = np.nan
     a[int(la[3]) - 3:int(la[3]) + 4, :] = 7.0
     pl[4] += 3.4
-    res = match_points(a, b, la, ca, pl, pc, search=(2, 2))
+    res = match_points(a, b, la, ca, pl, pc, search=(2, 2), backend=backend)
     assert res.flags[0] == 0 and res.valid[0]
     assert res.flags[1] & MatchFlag.OUT_OF_BOUNDS
     assert res.flags[2] & MatchFlag.NO_DATA
@@ -112,10 +114,10 @@ def test_flags():
     assert np.array_equal(res.valid, res.flags == 0)
     # unrelated band: low correlation
     noise = np.random.default_rng(0).standard_normal(b.shape)
-    res = match_points(a, noise, la[5:], ca[5:], pl[5:], pc[5:])
+    res = match_points(a, noise, la[5:], ca[5:], pl[5:], pc[5:], backend=backend)
     assert np.all(res.flags & MatchFlag.LOW_CORRELATION)
     # a precision requirement nobody meets
-    res = match_points(a, b, la[5:], ca[5:], pl[5:], pc[5:], max_std=1e-6)
+    res = match_points(a, b, la[5:], ca[5:], pl[5:], pc[5:], max_std=1e-6, backend=backend)
     assert np.all(res.flags & MatchFlag.IMPRECISE)
 
 
@@ -137,6 +139,8 @@ def test_empty_and_single_point(same):
     ({"order": 0}, "order"),
     ({"max_iter": 0}, "max_iter"),
     ({"tol": -1.0}, "tol"),
+    ({"backend": "gpu"}, "backend"),
+    ({"backend": "compiled", "method": "phase"}, "backend"),
 ])
 def test_bad_parameters(kw, name):
     img = np.zeros((50, 80))
@@ -193,3 +197,57 @@ def test_support_margin():
     assert support_margin(window=(1, 5), search=(0, 0), order=1) == (2, 4)
     with pytest.raises(ValueError, match="window"):
         support_margin(window=(2, 31))
+
+
+@pytest.mark.parametrize("window, search, order, case", [
+    ((3, 31), (2, 2), 4, "same"), ((3, 31), (3, 3), 4, "cross"), ((5, 21), (1, 3), 3, "cross"),
+    ((1, 15), (0, 2), 2, "same"), ((3, 31), (0, 0), 4, "same")])
+def test_compiled_kernel_agrees_with_numpy_reference(window, search, order, case):
+    # two independent implementations of one algorithm (per-point compiled loop,
+    # batched single-precision NumPy): same decisions, same positions
+    data = synthetic_pairs(seed=7, n=600, case=case, noise=0.05, window=window, search=search,
+                           max_shift=min(1.0, min(search)))
+    rng = np.random.default_rng(1)
+    la, ca = data["lines"] + rng.uniform(-0.5, 0.5, 600), data["cols"] + rng.uniform(-0.5, 0.5, 600)
+    pl = la + data["shift_lines"] + rng.uniform(-0.3, 0.3, 600)
+    pc = ca + data["shift_cols"] + rng.uniform(-0.3, 0.3, 600)
+    kw = dict(window=window, search=search, order=order, min_quality=0.5)
+    rc = match_points(data["image_a"], data["image_b"], la, ca, pl, pc, backend="compiled", **kw)
+    rn = match_points(data["image_a"], data["image_b"], la, ca, pl, pc, backend="numpy", **kw)
+    assert rc.valid.mean() > 0.8
+    # decisions may differ only on the knife edge of a threshold
+    assert np.mean(rc.flags == rn.flags) > 0.995
+    both = rc.valid & rn.valid
+    assert np.max(np.abs(rc.line_b - rn.line_b)[both]) < 1e-4
+    assert np.max(np.abs(rc.col_b - rn.col_b)[both]) < 1e-4
+    assert np.max(np.abs(rc.quality - rn.quality)[both]) < 1e-4
+    assert np.allclose(rc.std_line[both], rn.std_line[both], rtol=1e-2)
+    assert np.allclose(rc.std_col[both], rn.std_col[both], rtol=1e-2)
+
+
+def test_compiled_kernel_same_bytes_on_any_thread_count(cross):
+    numba = pytest.importorskip("numba")
+    la, ca = cross["lines"], cross["cols"]
+    prev = numba.get_num_threads()
+    out = []
+    try:
+        for n in sorted({1, prev}):
+            numba.set_num_threads(n)
+            out.append(match_points(cross["image_a"], cross["image_b"], la, ca, la + 0.2, ca - 0.3))
+    finally:
+        numba.set_num_threads(prev)
+    for f in ("line_b", "col_b", "quality", "flags", "std_line", "std_col"):
+        assert getattr(out[0], f).tobytes() == getattr(out[-1], f).tobytes()
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.uint16])
+def test_compiled_kernel_image_types(same, dtype):
+    # integer images (raw DN) are matched as float64; float32 stays float32
+    a = (same["image_a"] * 100).astype(dtype)
+    b = (same["image_b"] * 100).astype(dtype)
+    la, ca = same["lines"][:300], same["cols"][:300]
+    res = match_points(a, b, la, ca, la, ca, backend="compiled")
+    err = np.hypot(res.line_b - la - same["shift_lines"][:300], res.col_b - ca - same["shift_cols"][:300])
+    assert res.valid.mean() > 0.95
+    tol = 0.05 if dtype == np.uint16 else 0.02  # 16-bit quantisation of the texture
+    assert np.sqrt(np.mean(err[res.valid] ** 2)) < tol
