@@ -87,6 +87,9 @@ def bench_restore(*, scenario: str | None = None, lines: int | None = None, seed
     from reports.bench_integration import bench_integration
     out = {"differential_cnes_case": bench_integration(seed=seed)}
     out["end_to_end"] = bench_end_to_end(scenario=scenario or "phr_cmg", lines=lines)
+    # time against image length: two shorter acquisitions of the same scenario
+    n = out["end_to_end"]["lines"]
+    out["scaling"] = bench_scaling(scenario=scenario or "phr_cmg", sizes=(n // 4, n // 2), known=out["end_to_end"])
     # robustness: the same acquisition with 30 % of the scene under clouds
     out["clouds_30"] = bench_end_to_end(scenario=scenario or "phr_cmg", lines=lines, tag="clouds_30",
                                         overrides={"scene": {"texture": {"cloud_fraction": 0.3}}})
@@ -139,13 +142,29 @@ def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | 
             "coverage": res.coverage, "run_dir": str(rd)}
 
 
-def _bench_scaling(scenario: str = "phr_cmg", sizes=(1000, 2000, 4000)) -> dict:
-    """Restore time versus image length (should be linear)."""
-    out = []
+def bench_scaling(*, scenario: str = "phr_cmg", sizes=(1000, 2000), known: dict | None = None) -> dict:
+    """Restore time versus image length (it should grow linearly).
+
+    Renders and restores ``scenario`` at each length of ``sizes``; ``known``
+    (a :func:`bench_end_to_end` result) adds a point already measured.
+    Returns the points and a least-squares line ``restore_s = a + b * lines``
+    with the largest relative deviation of a point from it.
+    """
+    pts = []
     for n in sizes:
         r = bench_end_to_end(scenario=scenario, lines=n)
-        out.append({"lines": n, "restore_s": r["restore_s"]})
-    return {"scaling": out}
+        pts.append({"lines": n, "restore_s": r["restore_s"], "matches": r["timings"]["matches"]})
+    if known:
+        pts.append({"lines": known["lines"], "restore_s": known["restore_s"], "matches": known["timings"]["matches"]})
+    pts.sort(key=lambda p: p["lines"])
+    n = np.array([p["lines"] for p in pts], dtype=float)
+    t = np.array([p["restore_s"] for p in pts], dtype=float)
+    out = {"points": pts}
+    if n.size >= 2:
+        b, a = np.polyfit(n, t, 1)
+        out.update(offset_s=float(a), s_per_1000_lines=float(1000 * b),
+                   max_relative_deviation=float(np.max(np.abs(a + b * n - t) / t)))
+    return out
 
 
 def run_bench(what: str, *, scenario: str | None = None, out: str | None = None, lines: int | None = None,
@@ -208,6 +227,15 @@ def _format_end_to_end(e: dict, title: str) -> list:
     return lines
 
 
+def _format_scaling(s: dict) -> list:
+    pts = ", ".join(f"{p['lines']} lines {p['restore_s']:.1f} s" for p in s["points"])
+    out = [f"restore time against image length: {pts}"]
+    if "s_per_1000_lines" in s:
+        out.append(f"  linear fit: {s['offset_s']:.1f} s + {s['s_per_1000_lines']:.2f} s per 1000 lines "
+                   f"(largest deviation of a point {100 * s['max_relative_deviation']:.0f} %)")
+    return out
+
+
 def format_result(what: str, result: dict) -> str:
     r = result["result"]
     lines = []
@@ -247,6 +275,9 @@ def format_result(what: str, result: dict) -> str:
                 if key in r:
                     lines.append("")
                     lines.extend(_format_end_to_end(r[key], title))
+                if key == "end_to_end" and "scaling" in r:
+                    lines.append("")
+                    lines.extend(_format_scaling(r["scaling"]))
         except Exception as ex:  # pragma: no cover - formatting must never hide the JSON
             lines.append(json.dumps(r, indent=1, default=str)[:4000])
             lines.append(f"(formatting failed: {ex})")
