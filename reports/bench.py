@@ -142,6 +142,10 @@ def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | 
             "coverage": res.coverage, "run_dir": str(rd)}
 
 
+def _stages(timings: dict) -> dict:
+    return {k[:-2]: v for k, v in timings.items() if k.endswith("_s") and not k.endswith("per_s") and k != "total_s"}
+
+
 def bench_scaling(*, scenario: str = "phr_cmg", sizes=(1000, 2000), known: dict | None = None) -> dict:
     """Restore time versus image length (it should grow linearly).
 
@@ -153,9 +157,11 @@ def bench_scaling(*, scenario: str = "phr_cmg", sizes=(1000, 2000), known: dict 
     pts = []
     for n in sizes:
         r = bench_end_to_end(scenario=scenario, lines=n)
-        pts.append({"lines": n, "restore_s": r["restore_s"], "matches": r["timings"]["matches"]})
+        pts.append({"lines": n, "restore_s": r["restore_s"], "matches": r["timings"]["matches"],
+                    "stages_s": _stages(r["timings"])})
     if known:
-        pts.append({"lines": known["lines"], "restore_s": known["restore_s"], "matches": known["timings"]["matches"]})
+        pts.append({"lines": known["lines"], "restore_s": known["restore_s"], "matches": known["timings"]["matches"],
+                    "stages_s": _stages(known["timings"])})
     pts.sort(key=lambda p: p["lines"])
     n = np.array([p["lines"] for p in pts], dtype=float)
     t = np.array([p["restore_s"] for p in pts], dtype=float)
@@ -230,6 +236,10 @@ def _format_end_to_end(e: dict, title: str) -> list:
 def _format_scaling(s: dict) -> list:
     pts = ", ".join(f"{p['lines']} lines {p['restore_s']:.1f} s" for p in s["points"])
     out = [f"restore time against image length: {pts}"]
+    for p in s["points"]:
+        if "stages_s" in p:
+            out.append(f"  {p['lines']:6d} lines: " + ", ".join(f"{k} {v:.1f} s" for k, v in p["stages_s"].items())
+                       + f"; {p['matches']} matches")
     if "s_per_1000_lines" in s:
         out.append(f"  linear fit: {s['offset_s']:.1f} s + {s['s_per_1000_lines']:.2f} s per 1000 lines "
                    f"(largest deviation of a point {100 * s['max_relative_deviation']:.0f} %)")

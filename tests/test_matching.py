@@ -251,3 +251,15 @@ def test_compiled_kernel_image_types(same, dtype):
     assert res.valid.mean() > 0.95
     tol = 0.05 if dtype == np.uint16 else 0.02  # 16-bit quantisation of the texture
     assert np.sqrt(np.mean(err[res.valid] ** 2)) < tol
+
+
+def test_compiled_kernel_from_several_threads(same):
+    # a threaded sweep calls the matcher concurrently: same results, no abort
+    from concurrent.futures import ThreadPoolExecutor
+
+    la, ca = same["lines"][:400], same["cols"][:400]
+    ref = match_points(same["image_a"], same["image_b"], la, ca, la, ca)
+    with ThreadPoolExecutor(4) as ex:
+        outs = list(ex.map(lambda _: match_points(same["image_a"], same["image_b"], la, ca, la, ca), range(8)))
+    for o in outs:
+        assert o.line_b.tobytes() == ref.line_b.tobytes() and o.col_b.tobytes() == ref.col_b.tobytes()
