@@ -64,7 +64,7 @@ class RestorationSettings:
     pair_order: str = "fused"
     anchor_star_tracker: bool = True
     correct_images: bool = True
-    correction_column_step: int = 16
+    correction_column_step: int = 64
     min_coverage: float = 0.05
 
 
