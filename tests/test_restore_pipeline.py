@@ -206,3 +206,26 @@ def test_best_first_pair_order_folds_pairs_in_and_beats_the_knowledge(tiny_resto
     assert json.loads(ds.attrs["settings"])["pair_order"] == "best_first"
     with pytest.raises(ScenarioError, match="pair_order"):
         restoration_settings({"pair_order": "worst_first"})
+
+
+def test_resampling_grid_interpolated_between_exact_columns(tiny_restored):
+    # the grid is exact every `column_step` columns and linear in between: with the
+    # restored attitude (a rotation away from the knowledge) it must stay within
+    # a thousandth of a pixel of the grid computed exactly at every column
+    from restore.correction import resampling_grid
+    from simsat.attitude import AttitudeSeries
+    from simsat.product import read_product
+
+    d, _ = tiny_restored
+    product = read_product(d)
+    rest = xr.load_dataset(d / "restoration.nc")
+    t = np.asarray(rest["time"].values, dtype=np.float64)
+    series = AttitudeSeries(time=t, **{a: np.nan_to_num(np.asarray(rest[a].values, dtype=np.float64))
+                                       if a in rest else np.zeros(t.size) for a in ("roll", "pitch", "yaw")})
+    exact = resampling_grid(product, "B0", series, column_step=1)
+    coarse = resampling_grid(product, "B0", series, column_step=64)
+    for e, c in zip(exact, coarse):
+        assert np.nanmax(np.abs(e - c)) < 1e-3
+    # and it really moves the pixels (the restored attitude is not the knowledge)
+    cols = np.arange(exact[1].shape[1])
+    assert np.nanmax(np.abs(exact[1] - cols[None, :])) > 0.1
