@@ -47,6 +47,7 @@ class RestorationSettings:
     pairs: list | str = "auto"
     selection: str = "grid"
     points_per_line: int = 24
+    texture_max_std_px: float = 0.4
     window: tuple = (3, 31)
     search: tuple = (3, 3)
     pilot_search: tuple = (8, 8)
@@ -82,6 +83,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.pairs = pairs
     s.selection = sec.string("selection", s.selection, choices=("grid", "double_gradient", "spread"))
     s.points_per_line = sec.integer("points_per_line", s.points_per_line, ge=3, le=1000)
+    s.texture_max_std_px = sec.number("texture_max_std_px", s.texture_max_std_px, gt=0)
     wl = sec.integer("window_lines", s.window[0], ge=1, le=63)
     wc = sec.integer("window_columns", s.window[1], ge=3, le=255)
     if wl % 2 == 0:
@@ -300,7 +302,7 @@ def pilot_shift(img_a, img_b, lines_a, cols_a, pred_l, pred_c, n_lines: int, set
     return out[0], out[1]
 
 
-def _grid_points_fallback(image, *, method, per_line, window, margin, line_mask, search=None):
+def _grid_points_fallback(image, *, method, per_line, window, margin, line_mask, search=None, max_std=None):
     n_lines, n_cols = image.shape
     ml, mc = margin
     cols = np.linspace(mc + 1, n_cols - mc - 2, per_line)
@@ -400,7 +402,7 @@ def match_pair(product: Product, ahead: str, behind: str, settings: RestorationS
     usable[lo:hi] = True
     lines_a, cols_a = select_points(img_a, method=settings.selection, per_line=settings.points_per_line,
                                     window=settings.window, search=settings.search, margin=(ml, mc),
-                                    line_mask=usable)
+                                    line_mask=usable, max_std=settings.texture_max_std_px)
     name = f"{ahead}/{behind}"
     if lines_a.size == 0:
         return PairData(name=name, ahead=ahead, behind=behind, tau_s=tau, line_a=lines_a, col_a=cols_a,

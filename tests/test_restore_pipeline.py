@@ -114,6 +114,9 @@ def test_missing_product_and_bad_settings_are_named(tmp_path):
         restoration_settings({"window_lines": 4})
     with pytest.raises(ScenarioError, match="restoration.methd: unknown key"):
         restoration_settings({"methd": "wiener"})
+    with pytest.raises(ScenarioError, match="restoration.texture_max_std_px"):
+        restoration_settings({"texture_max_std_px": 0.0})
+    assert restoration_settings({"texture_max_std_px": 0.25}).texture_max_std_px == 0.25
 
 
 @pytest.mark.slow
