@@ -537,8 +537,14 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
             change = 0.0
             for a in settings.axes:
                 if all(np.all(~np.isfinite(d)) for d in diffs[a]):
-                    raise RestorationError(f"{product.path}: no line could be synthesised on {a} "
-                                           "(too few good matches per line)")
+                    counts = "; ".join(f"{p.name}: {int(np.count_nonzero(p.valid))} valid of {p.valid.size} "
+                                       f"candidates over {n_lines} lines" for p in pairs)
+                    raise RestorationError(
+                        f"{product.path}: no line could be synthesised on {a}: fewer than "
+                        f"restoration.min_points_per_line = {settings.min_points_per_line} good matches on every "
+                        f"line ({counts}); the bands are too noisy or too poorly textured for the "
+                        f"a-priori criterion (restoration.texture_max_std_px = {settings.texture_max_std_px}) "
+                        f"and restoration.min_quality = {settings.min_quality}")
                 inc = _integrate_time_sync(diffs[a], taus, lags, te, method=method, settings=settings,
                                            sigmas=sigmas[a], weights=points)
                 valid_est[a] = np.isfinite(inc)
