@@ -489,7 +489,9 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
         if n_valid < settings.min_points_per_line * 10:
             raise RestorationError(
                 f"{product.path}: no usable texture — only {n_valid} valid matches out of {n_matches} candidates over "
-                f"{len(pairs)} pairs (water, clouds or flat areas everywhere?); nothing to restore")
+                f"{len(pairs)} pairs (water, clouds, flat areas or noise everywhere? candidates pass the a-priori "
+                f"criterion restoration.texture_max_std_px = {settings.texture_max_std_px}, matches "
+                f"restoration.min_quality = {settings.min_quality}); nothing to restore")
 
         kn = product.knowledge
         kr, kp, ky = kn.at(t_line)

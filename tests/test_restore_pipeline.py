@@ -106,6 +106,18 @@ def test_flat_product_ends_with_a_clear_message(tiny_restored, tmp_path):
     assert not (flat / "restoration.nc").exists()
 
 
+def test_noise_without_signal_ends_with_a_clear_message(tmp_path):
+    # bands drowned in read noise: matching finds nothing, the restoration says so
+    d = tmp_path / "noisy"
+    simulate(load_scenario("tiny", overrides={"instrument": {"noise": {"read_noise_e": 3000.0,
+                                                                       "signal_fraction": 0.1}}}), d, progress=False)
+    p = subprocess.run([sys.executable, "-m", "simsat.cli", "restore", str(d), "--quiet"], capture_output=True,
+                       text=True)
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert "no usable texture" in p.stderr and "restoration.texture_max_std_px" in p.stderr
+    assert not (d / "restoration.nc").exists()
+
+
 def test_missing_product_and_bad_settings_are_named(tmp_path):
     p = subprocess.run([sys.executable, "-m", "simsat.cli", "restore", str(tmp_path), "--quiet"], capture_output=True,
                        text=True)
