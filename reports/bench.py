@@ -147,7 +147,7 @@ def _stages(timings: dict) -> dict:
 
 
 def bench_scaling(*, scenario: str = "phr_cmg", sizes=(1000, 2000), known: dict | None = None,
-                  repeat: int = 2) -> dict:
+                  repeat: int = 3) -> dict:
     """Restore time versus image length (it should grow linearly).
 
     Renders ``scenario`` at each length of ``sizes`` (``known``, a
