@@ -241,6 +241,11 @@ class _Progress:
             self.bar.set_postfix_str(label)
             self.bar.update(1)
 
+    def note(self, label: str):
+        """Say what the current stage is doing, without advancing."""
+        if self.bar is not None:
+            self.bar.set_postfix_str(label)
+
     def close(self):
         if self.bar is not None:
             self.bar.close()
@@ -480,6 +485,10 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
         # 1-2. matching
         t = _time.perf_counter()
         pairs = []
+        if settings.match_method == "ncc":
+            from ._ncc_kernel import match_ncc
+            if not match_ncc.signatures:  # first use in this process: loaded from Numba's cache, or compiled
+                bar.note("loading the matching kernel (compiled on first use, ~10-15 s, cached after)")
         for a, b in pairs_ab:
             pairs.append(match_pair(product, a, b, settings, sm))
             bar.step(f"matched {a}/{b}")
