@@ -535,11 +535,11 @@ def _match_compiled(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, min_quali
     """:func:`match_points` ``"ncc"`` through the compiled kernel."""
     from ._ncc_kernel import match_ncc
 
-    def native(img):  # the kernel is compiled for C-ordered float32 and float64 images
-        dtype = img.dtype if img.dtype in (np.float32, np.float64) else np.float64
-        return np.ascontiguousarray(img, dtype=dtype)
-
-    image_a, image_b = native(image_a), native(image_b)
+    # the kernel is compiled for two C-ordered images of one type: float32 (products)
+    # when both are, else float64 (each new combination of types would cost a compilation)
+    both32 = image_a.dtype == np.float32 and image_b.dtype == np.float32
+    dtype = np.float32 if both32 else np.float64
+    image_a, image_b = (np.ascontiguousarray(img, dtype=dtype) for img in (image_a, image_b))
     with _KERNEL_LOCK:
         out = match_ncc(image_a, image_b, la, ca, pl, pc, h, w, sl, sc, order, max_iter, tol,
                         min_quality, -1.0 if max_std is None else float(max_std))
