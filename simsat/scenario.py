@@ -29,7 +29,7 @@ else:  # pragma: no cover
 
 __all__ = ["Scenario", "load_scenario", "builtin_scenarios", "find_scenario", "SCENARIO_DIR"]
 
-SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+SCENARIO_DIR = (Path(__file__).resolve().parent / "scenarios").resolve()  # a link to the top-level scenarios/ in a checkout
 TOP_LEVEL = ("scenario", "scene", "platform", "attitude", "instrument", "acquisition", "restoration", "report")
 
 
@@ -180,16 +180,30 @@ def builtin_scenarios() -> dict[str, Path]:
 
 
 def find_scenario(name_or_path: str | Path) -> Path:
-    """A path to a scenario file, or the built-in scenario of that name."""
+    """A path to a scenario file, or the built-in scenario of that name.
+
+    A bare name (no directory part, no ``.toml`` suffix, e.g. ``phr_cmg``)
+    means the built-in scenario of that name; anything else is a path, which
+    must exist -- a mistyped path is an error, never a silent fallback to a
+    built-in of the same stem.
+    """
     p = Path(name_or_path)
-    if p.exists():
-        return p
     builtin = builtin_scenarios()
-    if str(name_or_path) in builtin:
-        return builtin[str(name_or_path)]
-    if p.suffix == ".toml" and p.stem in builtin and not p.exists():
-        return builtin[p.stem]
-    raise ScenarioError(f"{name_or_path}: scenario file not found (built-in scenarios: {', '.join(builtin)})")
+    text = str(name_or_path)
+    is_bare_name = p.suffix != ".toml" and len(p.parts) == 1 and not text.startswith(".")
+    if is_bare_name and text in builtin:
+        return builtin[text]
+    if p.exists():
+        if p.is_dir():
+            raise ScenarioError(f"{p}: is a directory, expected a .toml scenario file")
+        return p
+    if is_bare_name:
+        raise ScenarioError(f"{text}: no built-in scenario of that name and no such file "
+                            f"(built-in scenarios: {', '.join(builtin)}; `simsat scenarios` lists them)")
+    hint = ""
+    if p.stem in builtin:
+        hint = f"; the built-in scenario of that name is `{p.stem}` (or {builtin[p.stem]})"
+    raise ScenarioError(f"{p}: scenario file not found{hint}")
 
 
 def load_scenario(source: str | Path | dict, *, overrides: dict | None = None, check_models: bool = True) -> Scenario:
