@@ -31,6 +31,7 @@ import numpy as np
 
 from simsat.config import ScenarioError, Section
 from simsat.product import Product, atomic_write_dataset, clamped_attitude, read_product
+from simsat.rundir import RunLock, content_id
 
 from .synthesis import AXES, drop_sparse, fill_short_gaps, highpass_nan, instant_synthesis, window_compensation
 
@@ -699,9 +700,20 @@ def restore_run(run_dir: str | Path, *, overrides: dict | None = None, progress:
         ov = overrides.get("restoration", overrides)
         table = {**table, **ov}
     settings = restoration_settings(Section(table, "restoration"))
-    res = restore_product(product, settings, progress=progress, run_dir=run_dir)
-    ds = restoration_dataset(res)
-    res.path = atomic_write_dataset(ds, run_dir / "restoration.nc")
-    if getattr(res, "corrected", None) is not None:
-        atomic_write_dataset(res.corrected, run_dir / "corrected.nc")
+    with RunLock(run_dir, "restore"):
+        res = restore_product(product, settings, progress=progress, run_dir=run_dir)
+        # provenance: which product and settings these outputs come from (checked by the report)
+        pid = str(product.ds.attrs.get("product_id", "")) or content_id(str(product.path))
+        rid = content_id(pid, _settings_dict(settings))
+        ds = restoration_dataset(res)
+        ds.attrs.update(product_id=pid, restoration_id=rid)
+        # corrected.nc first: a restore killed between the two writes leaves a corrected.nc whose
+        # restoration_id no longer matches restoration.nc, which the report refuses
+        corrected = getattr(res, "corrected", None)
+        if corrected is not None:
+            corrected.attrs.update(product_id=pid, restoration_id=rid)
+            atomic_write_dataset(corrected, run_dir / "corrected.nc")
+        elif (run_dir / "corrected.nc").is_file():
+            (run_dir / "corrected.nc").unlink()  # simsat's own output of an earlier restoration: stale now
+        res.path = atomic_write_dataset(ds, run_dir / "restoration.nc")
     return res

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 from pathlib import Path
 
 __all__ = ["main"]
@@ -24,7 +25,10 @@ def _print_err(msg: str) -> None:
 
 def _parse_set(items: list[str] | None) -> dict:
     """``--set key.sub=value`` overrides (value parsed as TOML)."""
-    import tomllib
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10: the backport the package declares
+        import tomli as tomllib
 
     out: dict = {}
     for item in items or []:
@@ -83,26 +87,75 @@ def cmd_render(args) -> int:
     from .simulate import simulate
 
     sc = load_scenario(args.scenario, overrides=_parse_set(args.set))
+    _validate_later_stages(sc)
     out = Path(args.out) if args.out else Path("runs") / sc.name
-    res = simulate(sc, out, progress=not args.quiet)
+    res = simulate(sc, out, progress=not args.quiet, force=args.force)
+    _say_replaced(out, res.replaced)
     rs = res.render_stats
     print(f"wrote {out}/product.nc, truth.nc, run.json — {rs['rays']:,} rays in {rs['wall_s']:.1f} s "
           f"({rs['rays_per_s'] / 1e6:.2f} Mrays/s, {rs['variant']}); total {res.timings['total_s']:.1f} s")
     return 0
 
 
+def _say_replaced(out: Path, replaced: list) -> None:
+    if replaced:
+        print(f"{out}: replaced simsat's earlier outputs ({', '.join(replaced)}); nothing else was touched",
+              file=sys.stderr)
+
+
+def _report(run_dir: Path, out_dir, *, quiet: bool) -> Path:
+    """Write the report of a run while holding its lock; refuse a run of mixed files."""
+    from reports.run_report import make_run_report
+
+    from .product import ProductError
+    from .rundir import RunLock, check_consistency
+
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        what = "is a file" if run_dir.exists() else "does not exist"
+        raise ProductError(f"{run_dir}: {what}; expected a run directory (made by `simsat render` or `simsat run`)")
+    if not (run_dir / "product.nc").exists():
+        raise ProductError(f"{run_dir / 'product.nc'}: file not found; {run_dir} is not a run directory "
+                           f"(run `simsat render SCENARIO --out {run_dir}` first)")
+    check_consistency(run_dir)
+    with RunLock(run_dir, "report"):
+        t0 = time.time_ns()
+        path = make_run_report(run_dir, out_dir=out_dir)
+        _write_report_manifest(Path(path).parent, since_ns=t0, run_dir=run_dir)
+        return path
+
+
+def _write_report_manifest(report_dir: Path, *, since_ns: int, run_dir: Path) -> None:
+    """List the files this report wrote (so a later render removes exactly those, and nothing of the user's)."""
+    from .product import atomic_write_json
+    from .rundir import REPORT_MANIFEST, read_ids
+
+    files = sorted(e.name for e in os.scandir(report_dir)
+                   if e.is_file(follow_symlinks=False) and not e.name.startswith(".")
+                   and e.stat().st_mtime_ns >= since_ns - 2_000_000_000)
+    atomic_write_json({"files": files, **read_ids(run_dir / "restoration.nc"),
+                       "product_id": read_ids(run_dir / "product.nc").get("product_id")},
+                      report_dir / REPORT_MANIFEST)
+
+
+def _summary(run_dir: Path, report_path=None) -> str:
+    from reports.summary import run_summary
+
+    return run_summary(run_dir, report_path=report_path)
+
+
 def cmd_restore(args) -> int:
     from restore.pipeline import restore_run
 
     res = restore_run(args.run_dir, overrides=_parse_set(args.set), progress=not args.quiet)
-    print(res.summary())
+    if not args.quiet:
+        print(res.summary())
+    print(_summary(Path(args.run_dir)))
     return 0
 
 
 def cmd_report(args) -> int:
-    from reports.run_report import make_run_report
-
-    path = make_run_report(args.run_dir, out_dir=args.out)
+    path = _report(Path(args.run_dir), args.out, quiet=args.quiet)
     print(f"wrote {path}")
     return 0
 
@@ -114,18 +167,16 @@ def cmd_run(args) -> int:
     sc = load_scenario(args.scenario, overrides=_parse_set(args.set))
     _validate_later_stages(sc)
     out = Path(args.out) if args.out else Path("runs") / sc.name
-    res = simulate(sc, out, progress=not args.quiet)
+    res = simulate(sc, out, progress=not args.quiet, force=args.force)
+    _say_replaced(out, res.replaced)
     print(f"rendered {out} in {res.timings['total_s']:.1f} s")
     from restore.pipeline import restore_run
 
     rres = restore_run(out, progress=not args.quiet)
-    print(rres.summary())
-    try:
-        from reports.run_report import make_run_report
-    except ImportError:  # pragma: no cover
-        return 0
-    path = make_run_report(out)
-    print(f"report: {path}")
+    if not args.quiet:
+        print(rres.summary())
+    path = _report(out, None, quiet=args.quiet)
+    print(_summary(out, report_path=path))
     return 0
 
 
@@ -158,46 +209,63 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_scenarios)
 
     s = sub.add_parser("validate", help="check a scenario file without rendering")
-    s.add_argument("scenario", help="scenario TOML file or built-in name")
-    s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scenario key")
+    s.add_argument("scenario", help="scenario: a TOML file path (must exist), or the name of a built-in scenario")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a scenario key, e.g. --set acquisition.lines=512 (value in TOML syntax)")
     s.set_defaults(func=cmd_validate)
 
+    scen_help = ("scenario: a TOML file path (must exist), or the name of a built-in scenario "
+                 "(`simsat scenarios` lists them; e.g. phr_cmg)")
+    set_help = ("override a scenario key, e.g. --set acquisition.lines=512 (value in TOML syntax; "
+                "repeat for several keys)")
+    out_help = ("run directory to write (default runs/<scenario name>); a new or empty directory, or a "
+                "simsat run whose simsat files are replaced; another non-empty directory needs --force")
+    force_help = ("write into a non-empty directory that is not a simsat run: simsat's files are written "
+                  "beside the others, nothing else is touched")
+    quiet_help = "no progress bars or stage messages (the result lines are still printed)"
+    run_dir_help = "run directory written by `simsat render` or `simsat run` (holds product.nc)"
+
     s = sub.add_parser("render", help="render a scenario into a product (product.nc, truth.nc, run.json)")
-    s.add_argument("scenario", help="scenario TOML file or built-in name")
-    s.add_argument("--out", help="output run directory (default runs/<name>)")
-    s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scenario key, e.g. acquisition.lines=512")
-    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("scenario", help=scen_help)
+    s.add_argument("--out", help=out_help)
+    s.add_argument("--force", action="store_true", help=force_help)
+    s.add_argument("--set", action="append", metavar="KEY=VALUE", help=set_help)
+    s.add_argument("--quiet", action="store_true", help=quiet_help)
     s.set_defaults(func=cmd_render)
 
     s = sub.add_parser("restore", help="restore the LOS attitude of a rendered product (writes restoration.nc)")
-    s.add_argument("run_dir")
-    s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a [restoration] key, e.g. method=wiener")
-    s.add_argument("--quiet", action="store_true")
+    s.add_argument("run_dir", help=run_dir_help)
+    s.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a [restoration] key, e.g. --set method=wiener or --set integration.k=1e-3")
+    s.add_argument("--quiet", action="store_true", help=quiet_help)
     s.set_defaults(func=cmd_restore)
 
     s = sub.add_parser("report", help="write the HTML report of a run")
-    s.add_argument("run_dir")
+    s.add_argument("run_dir", help=run_dir_help)
     s.add_argument("--out", help="report directory (default RUN_DIR/report)")
+    s.add_argument("--quiet", action="store_true", help=quiet_help)
     s.set_defaults(func=cmd_report)
 
-    s = sub.add_parser("run", help="render → restore → report in one go")
-    s.add_argument("scenario")
-    s.add_argument("--out")
-    s.add_argument("--set", action="append", metavar="KEY=VALUE")
-    s.add_argument("--quiet", action="store_true")
+    s = sub.add_parser("run", help="render → restore → report in one go, then print the restored error")
+    s.add_argument("scenario", help=scen_help)
+    s.add_argument("--out", help=out_help)
+    s.add_argument("--force", action="store_true", help=force_help)
+    s.add_argument("--set", action="append", metavar="KEY=VALUE", help=set_help)
+    s.add_argument("--quiet", action="store_true", help=quiet_help)
     s.set_defaults(func=cmd_run)
 
     s = sub.add_parser("figures", help="the founding patent's figures 7–14 (PNG + CSV)")
-    s.add_argument("--out", default="figures")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--out", default="figures", help="directory for the PNG and CSV files (default: %(default)s)")
+    s.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo points (default: %(default)s)")
     s.add_argument("--no-monte-carlo", action="store_true", help="analytic curves only")
+    s.add_argument("--quiet", action="store_true", help=quiet_help)
     s.set_defaults(func=cmd_figures)
 
     s = sub.add_parser("bench", help="benchmarks (results printed and written as JSON)")
     s.add_argument("what", choices=["render", "restore", "matching", "integration"])
     s.add_argument("--scenario", default=None, help="scenario (render/restore; default phr_cmg)")
     s.add_argument("--lines", type=int, default=None, help="override acquisition.lines")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=int, default=0, help="scenario seed of the bench runs (default: %(default)s)")
     s.add_argument("--out", default=None, help="JSON output file (default bench/<what>.json)")
     s.set_defaults(func=cmd_bench)
     return p

@@ -6,7 +6,6 @@ import platform as _pyplatform
 import shutil
 import math
 import sys
-import tempfile
 import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .product import atomic_write_dataset, atomic_write_json, make_tmp_dir
+from .rundir import RunLock, content_id, install_files, prepare_output_dir
 from .scenario import Scenario, load_scenario
 
 __all__ = ["simulate", "apply_radiometry", "SimulationResult", "build_world"]
@@ -24,6 +24,8 @@ class SimulationResult:
     out_dir: Path
     timings: dict = field(default_factory=dict)
     render_stats: dict = field(default_factory=dict)
+    #: simsat's outputs of a previous run in ``out_dir`` that were replaced or removed
+    replaced: list = field(default_factory=list)
 
 
 def _seed_seq(seed: int, *keys: int) -> np.random.SeedSequence:
@@ -89,18 +91,41 @@ def _versions() -> dict:
     return out
 
 
+def product_id(sc: Scenario) -> str:
+    """Provenance id of the product of a scenario: hash of the resolved scenario, seed and simsat version."""
+    from . import __version__
+
+    return content_id(sc.to_dict(), int(sc.seed), __version__)
+
+
 def simulate(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: bool = True,
-             overwrite: bool = True) -> SimulationResult:
+             force: bool = False) -> SimulationResult:
     """Render a scenario into ``out_dir`` (product.nc, truth.nc, run.json).
 
-    Everything is first written into a temporary sibling directory which is
-    renamed to ``out_dir`` at the end: a crashed run leaves no product that
-    looks whole.
+    ``out_dir`` may be new, empty, or a simsat run (whose own files are
+    replaced; its restoration, corrected images and report, derived from the
+    old product, are removed). A non-empty directory that is not a run is
+    refused unless ``force`` (then simsat's files are written beside the
+    others; nothing else is touched). The directory is locked while the
+    render writes (:class:`simsat.rundir.RunLock`). Everything is first
+    written into a temporary directory inside ``out_dir`` and moved into
+    place at the end, ``run.json`` last: a crashed run leaves no product
+    that looks whole.
+
+    Raises
+    ------
+    simsat.rundir.RunDirError
+        ``out_dir`` cannot be used (message names it and the way out).
     """
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    out_dir = prepare_output_dir(out_dir, force=force)
+    with RunLock(out_dir, "render"):
+        return _simulate_locked(sc, out_dir, progress=progress)
+
+
+def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> SimulationResult:
     import xarray as xr
 
-    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    out_dir = Path(out_dir)
     timings = {}
     t_all = _time.perf_counter()
 
@@ -157,9 +182,11 @@ def simulate(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: 
                "pixel_ifov_rad": inst.ifov_rad(sc.acquisition.reference_detector),
                "dem_dx_m": float(dem.dx_m), "dem_dy_m": float(dem.dy_m)})
 
-    # write everything into a temp dir, then move into place
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = make_tmp_dir(out_dir)
+    # write everything into a temp dir inside out_dir, then move simsat's files into place
+    pid = product_id(sc)
+    ds.attrs["product_id"] = pid
+    truth.attrs["product_id"] = pid
+    tmp = make_tmp_dir(out_dir / "render")
     try:
         t = _time.perf_counter()
         atomic_write_dataset(ds, tmp / "product.nc")
@@ -172,21 +199,14 @@ def simulate(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: 
                         "shade_s": rs.shade_s, "blocks": rs.blocks, "misses": rs.misses}
         run = {"scenario": sc.to_dict(), "seed": sc.seed, "name": sc.name, "versions": _versions(),
                "timings": timings, "render": render_stats,
-               "files": {"product": "product.nc", "truth": "truth.nc"}}
+               "product_id": pid, "files": {"product": "product.nc", "truth": "truth.nc"}}
         atomic_write_json(run, tmp / "run.json")
-        if out_dir.exists():
-            if not overwrite:
-                raise FileExistsError(f"{out_dir}: exists")
-            old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".old", dir=out_dir.parent))
-            os.replace(out_dir, old / "x")
-            os.replace(tmp, out_dir)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, out_dir)
+        replaced = install_files(tmp, out_dir, ["product.nc", "truth.nc", "run.json"])
+        tmp.rmdir()
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return SimulationResult(out_dir=out_dir, timings=timings, render_stats=render_stats)
+    return SimulationResult(out_dir=out_dir, timings=timings, render_stats=render_stats, replaced=replaced)
 
 
 def _product_dataset(sc: Scenario, images: dict, t_lines, kn, st, known_dem):

@@ -1,0 +1,70 @@
+"""The few lines a user reads in the terminal after ``simsat run`` / ``simsat restore``.
+
+Restored error per axis (RMS and 99.7 % of |error|, mean removed, against
+truth when the run has it), the AOCS knowledge error beside it, coverage, and
+the verdict against the scenario's requirement -- the same figures as the
+report's headline (:func:`reports.report_data.headline`), from the same code.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from . import report_data as D
+
+__all__ = ["run_summary"]
+
+
+def _fmt(x: float) -> str:
+    return "n/a" if x is None or x != x else f"{x:.3f}"
+
+
+def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -> str:
+    """A short text summary of a restored run.
+
+    Parameters
+    ----------
+    run_dir : path
+        Run directory (product.nc, restoration.nc, truth.nc when simulated).
+    report_path : path, optional
+        Where the HTML report is, said on the last line.
+
+    Returns
+    -------
+    str
+        Several lines: one per axis with restored and knowledge errors [px and
+        µrad for yaw], coverage, then ``PASS``/``FAIL`` and the reason, or why
+        the requirement cannot be checked.
+    """
+    run = D.load_run(run_dir)
+    hd = D.headline(run)
+    axes_r = D.restored_axes(run)
+    lines = []
+    if run.restoration is None:
+        lines.append("no restoration in this run (run `simsat restore RUN_DIR`)")
+    elif run.truth is None:
+        lines.append("no truth in this run: the restored error cannot be measured")
+        for a in axes_r:
+            d = hd["axes"][a]
+            lines.append(f"  {a:5s}  coverage {d.get('coverage', float('nan')) * 100:5.1f} %, "
+                         f"correction {d.get('correction_rms_px', float('nan')):.3f} px RMS")
+    else:
+        lines.append(f"{'':12s}{'restored error':>18s}  {'AOCS knowledge':>18s}  {'coverage':>9s}")
+        lines.append(f"{'':12s}{'RMS':>9s}{'99.7 %':>9s}  {'RMS':>9s}{'99.7 %':>9s}")
+        for a in axes_r:
+            d = hd["axes"][a]
+            unit, key = ("µrad", "urad") if a == "yaw" else ("px", "px")  # yaw barely moves the image
+            lines.append(f"  {a:5s}{'[' + unit + ']':>5s}"
+                         f"{_fmt(d.get('rms_' + key)):>9s}{_fmt(d.get('p997_' + key)):>9s}  "
+                         f"{_fmt(d.get('knowledge_rms_' + key)):>9s}{_fmt(d.get('knowledge_p997_' + key)):>9s}  "
+                         f"{d.get('coverage', float('nan')) * 100:8.1f}%")
+        lines.append("  (error = estimate − truth, mean removed: the constant is unobservable from images)")
+    verdict = hd.get("verdict") or ""
+    if hd.get("passed") is True:
+        lines.append(f"requirement: {verdict}")
+    elif hd.get("passed") is False:
+        lines.append(f"requirement: {verdict}")
+    elif verdict:
+        lines.append(f"requirement not checked: {verdict}")
+    if report_path is not None:
+        lines.append(f"report: {report_path}")
+    return "\n".join(lines)
