@@ -92,10 +92,18 @@ def _versions() -> dict:
 
 
 def product_id(sc: Scenario) -> str:
-    """Provenance id of the product of a scenario: hash of the resolved scenario, seed and simsat version."""
+    """Provenance id of the product of a scenario.
+
+    A hash of what decides the product's bytes: the resolved scenario without
+    its file location and without the tables read only after rendering
+    (``[restoration]``, ``[report]``), the seed, and simsat's version.
+    """
     from . import __version__
 
-    return content_id(sc.to_dict(), int(sc.seed), __version__)
+    d = sc.to_dict()
+    d.pop("source", None)
+    d["raw"] = {k: v for k, v in d["raw"].items() if k not in ("restoration", "report")}
+    return content_id(d, int(sc.seed), __version__)
 
 
 def simulate(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: bool = True,
