@@ -217,3 +217,24 @@ def test_report_on_a_missing_run_creates_nothing(capsys, tmp_path):
     rc, out, err = _cli(capsys, "report", str(d))
     assert rc == 2 and "does not exist" in err
     assert not d.exists()
+
+
+def test_restore_killed_between_its_writes_is_detected(capsys, tmp_path, restored, monkeypatch):
+    """A restore with other settings that dies after corrected.nc: the report refuses the mixed pair."""
+    import restore.pipeline as pl
+
+    d = _copy(restored, tmp_path / "run")
+    real = pl.atomic_write_dataset
+
+    def write_then_die(ds, path, **kw):
+        if Path(path).name == "restoration.nc":
+            raise KeyboardInterrupt
+        return real(ds, path, **kw)
+
+    monkeypatch.setattr(pl, "atomic_write_dataset", write_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        pl.restore_run(d, overrides={"min_quality": 0.55}, progress=False)
+    monkeypatch.undo()
+    assert not any(p.name.endswith(".part") for p in d.iterdir())
+    rc, out, err = _cli(capsys, "report", str(d), "--quiet")
+    assert rc == 2 and "made by another restoration" in err
