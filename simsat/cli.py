@@ -271,6 +271,19 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _os_hint(e: OSError) -> str:
+    import errno
+
+    hints = {errno.EEXIST: " (a file is in the way where a directory is needed)",
+             errno.ENOTDIR: " (a path component is a file, not a directory)",
+             errno.EACCES: " (no permission: choose a writable location)",
+             errno.EPERM: " (no permission: choose a writable location)",
+             errno.EROFS: " (read-only file system: choose a writable location)",
+             errno.ENOSPC: " (disk full: free space or write elsewhere)",
+             errno.EISDIR: " (a directory is in the way of a file)"}
+    return hints.get(e.errno, "")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -288,6 +301,22 @@ def main(argv: list[str] | None = None) -> int:
     except FileNotFoundError as e:
         _print_err(f"{e.filename}: file not found" if e.filename else str(e))
         return 2
+    except MemoryError:
+        _print_err("out of memory; reduce the scenario's size (acquisition.lines, instrument pixels) or "
+                   "acquisition.block_lines")
+        return 2
+    except OSError as e:
+        # the environment refused a file operation (a file in the way of a directory, no permission,
+        # disk full, read-only file system): a user-fixable condition that names its path
+        if e.filename is not None or e.errno is not None:
+            where = f"{e.filename}: " if e.filename is not None else ""
+            other = f" -> {e.filename2}" if getattr(e, "filename2", None) else ""
+            _print_err(f"{where}{e.strerror or e}{other}" + _os_hint(e))
+            return 2
+        if os.environ.get("SIMSAT_DEBUG"):
+            raise
+        _print_err(f"internal error ({type(e).__name__}: {e}); set SIMSAT_DEBUG=1 for the traceback")
+        return 1
     except KeyboardInterrupt:
         _print_err("interrupted")
         return 130

@@ -238,3 +238,11 @@ def test_restore_killed_between_its_writes_is_detected(capsys, tmp_path, restore
     assert not any(p.name.endswith(".part") for p in d.iterdir())
     rc, out, err = _cli(capsys, "report", str(d), "--quiet")
     assert rc == 2 and "made by another restoration" in err
+
+
+def test_os_refusals_are_one_line_naming_the_path(capsys, tmp_path):
+    f = tmp_path / "afile"
+    f.write_text("x")
+    rc, out, err = _cli(capsys, "figures", "--out", str(f), "--no-monte-carlo")
+    assert rc == 2 and str(f) in err and "in the way" in err
+    assert f.read_text() == "x"
