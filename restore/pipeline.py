@@ -98,6 +98,10 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.match_method = sec.string("match_method", s.match_method, choices=("ncc", "phase"))
     s.min_quality = sec.number("min_quality", s.min_quality, ge=-1, le=1)
     s.axes = tuple(sec.strings("axes", list(s.axes), choices=AXES))
+    if not s.axes:
+        raise sec.error("axes", f"must name at least one axis of {', '.join(AXES)}")
+    if len(set(s.axes)) != len(s.axes):
+        raise sec.error("axes", f"names an axis twice: {list(s.axes)}")
     s.n_sigma = sec.number("n_sigma", s.n_sigma, gt=0)
     s.min_points_per_line = sec.integer("min_points_per_line", s.min_points_per_line, ge=2)
     s.highpass_hz = sec.number("highpass_hz", s.highpass_hz, ge=0)
@@ -111,7 +115,11 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
             raise sec.error("method", f"must be one of {', '.join(allowed)}; got {m!r}")
     s.method = m
     opts = sec.section("integration")
-    s.integration_options = dict(opts.data)
+    from .integration import check_options
+    try:
+        s.integration_options = dict(check_options(m, dict(opts.data), where=opts.path))
+    except ValueError as e:
+        raise ScenarioError(str(e)) from None
     opts.finish(extra_allowed=opts.data.keys())
     s.iterations = sec.integer("iterations", s.iterations, ge=1, le=10)
     s.pair_order = sec.string("pair_order", s.pair_order, choices=("fused", "best_first"))

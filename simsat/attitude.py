@@ -45,6 +45,16 @@ __all__ = [
 
 AXES = ("roll", "pitch", "yaw")
 URAD = 1e-6  #: one microradian in rad
+MAX_AMPLITUDE_URAD = 1e5    #: 0.1 rad (5.7°): beyond, the small-angle line-of-sight model is meaningless
+MAX_FREQUENCY_HZ = 1e5      #: far above any line rate; bounds the truth sampling
+MAX_SAMPLE_RATE_HZ = 1e4    #: AOCS knowledge / star tracker sampling
+MAX_PSD_COMPONENTS = 100_000  #: sinusoids of a ``psd`` jitter (memory and time grow with it)
+
+
+def _check_list_max(sec, name: str, values, vmax: float) -> None:
+    for i, v in enumerate(values):
+        if v > vmax:
+            raise sec.error(f"{name}[{i}]" if len(values) > 1 else name, f"must be <= {vmax:g}, got {v:g}")
 
 # Stream tags appended to the scenario seed so that attitude draws never collide
 # with other modules using ``SeedSequence([seed, index])``.
@@ -487,19 +497,22 @@ def disturbance_from_config(sec: Section, *, rng: np.random.Generator, t_start: 
     """
     if kind == "harmonic":
         return HarmonicJitter(
-            frequency_hz=sec.number("frequency_hz", gt=0),
-            amplitude_rad=sec.number("amplitude_urad", ge=0) * URAD,
+            frequency_hz=sec.number("frequency_hz", gt=0, le=MAX_FREQUENCY_HZ),
+            amplitude_rad=sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * URAD,
             phase_rad=math.radians(sec.number("phase_deg", 0.0)),
             drift=sec.number("drift_percent", 0.0, gt=-100) / 100,
             drift_shape=sec.string("drift_shape", "linear", choices=_DRIFT_SHAPES),
             t0=t_start, t_end=t_end)
     if kind == "cmg":
         fe = sec.numbers("exciter_frequencies_hz", min_length=1, gt=0)
+        _check_list_max(sec, "exciter_frequencies_hz", fe, MAX_FREQUENCY_HZ)
         hh = sec.numbers("harmonics", [1.0], min_length=1, gt=0)
-        amp = sec.number("amplitude_urad", ge=0) * URAD
+        _check_list_max(sec, "harmonics", hh, 1000.0)
+        amp = sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * URAD
         rexc = sec.numbers("exciter_amplitude_ratios", None, length=len(fe), ge=0)
         rharm = sec.numbers("harmonic_amplitude_ratios", None, length=len(hh), ge=0)
         drift = sec.numbers("drift_percent", [0.0, 0.0], ge=0)
+        _check_list_max(sec, "drift_percent", drift, 50.0)
         if len(drift) == 1:
             drift = drift * 2
         if len(drift) != 2 or drift[0] > drift[1]:
@@ -508,28 +521,31 @@ def disturbance_from_config(sec: Section, *, rng: np.random.Generator, t_start: 
             exciter_frequencies_hz=fe, harmonics=hh, amplitude_rad=amp, rng=rng,
             t0=t_start, t_end=t_end, exciter_amplitude_ratios=rexc,
             harmonic_amplitude_ratios=rharm, drift_range=(drift[0] / 100, drift[1] / 100),
-            frequency_noise=sec.number("frequency_noise_percent", 0.0, ge=0) / 100,
-            amplitude_noise=sec.number("amplitude_noise_percent", 0.0, ge=0) / 100,
-            noise_bandwidth_hz=sec.number("noise_bandwidth_hz", 1.0, gt=0))
+            frequency_noise=sec.number("frequency_noise_percent", 0.0, ge=0, le=50) / 100,
+            amplitude_noise=sec.number("amplitude_noise_percent", 0.0, ge=0, le=100) / 100,
+            noise_bandwidth_hz=sec.number("noise_bandwidth_hz", 1.0, gt=0, le=MAX_FREQUENCY_HZ))
     if kind == "damped_chirp":
         return DampedChirpJitter(
-            amplitude_rad=sec.number("amplitude_urad", ge=0) * URAD,
-            frequency_hz=sec.number("frequency_hz", gt=0),
-            chirp_hz_per_s=sec.number("chirp_hz_per_s", 0.0),
-            damping_time_s=sec.number("damping_time_s", gt=0),
-            start_time_s=sec.number("start_time_s", 0.0), t0=t_start)
+            amplitude_rad=sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * URAD,
+            frequency_hz=sec.number("frequency_hz", gt=0, le=MAX_FREQUENCY_HZ),
+            chirp_hz_per_s=sec.number("chirp_hz_per_s", 0.0, ge=-1e5, le=1e5),
+            damping_time_s=sec.number("damping_time_s", gt=0, le=1e6),
+            start_time_s=sec.number("start_time_s", 0.0, ge=-1e6, le=1e6), t0=t_start)
     if kind == "psd":
-        f_min = sec.number("f_min_hz", 0.1, gt=0)
-        f_max = sec.number("f_max_hz", 1000.0, gt=0)
+        f_min = sec.number("f_min_hz", 0.1, gt=0, le=MAX_FREQUENCY_HZ)
+        f_max = sec.number("f_max_hz", 1000.0, gt=0, le=MAX_FREQUENCY_HZ)
         if not f_max > f_min:
             raise sec.error("f_max_hz", f"must be > f_min_hz ({f_min:g}), got {f_max:g}")
         return PSDJitter(
-            rms_rad=sec.number("rms_urad", ge=0) * URAD,
-            corner_hz=sec.number("corner_hz", gt=0), slope=sec.number("slope", 2.0, ge=0),
+            rms_rad=sec.number("rms_urad", ge=0, le=MAX_AMPLITUDE_URAD) * URAD,
+            corner_hz=sec.number("corner_hz", gt=0, le=MAX_FREQUENCY_HZ), slope=sec.number("slope", 2.0, ge=0, le=10),
             f_min_hz=f_min, f_max_hz=f_max, rng=rng, t0=t_start,
-            n_components=sec.integer("n_components", 400, ge=1))
+            n_components=sec.integer("n_components", 400, ge=1, le=MAX_PSD_COMPONENTS))
     if kind == "polynomial":
         coefs = sec.numbers("coefficients_urad", min_length=1)
+        _check_list_max(sec, "coefficients_urad", [abs(c) for c in coefs], MAX_AMPLITUDE_URAD)
+        if len(coefs) > 8:
+            raise sec.error("coefficients_urad", f"at most 8 coefficients (degree 7), got {len(coefs)}")
         return PolynomialDrift(tuple(c * URAD for c in coefs), t0=t_start)
     raise ValueError(f"kind: unknown {kind!r}")  # pragma: no cover - guarded by caller
 
@@ -547,9 +563,9 @@ class KnowledgeConfig:
 
     @classmethod
     def from_section(cls, sec: Section) -> "KnowledgeConfig":
-        cut = sec.number("cutoff_hz", cls.cutoff_hz, gt=0)
-        rate = sec.number("rate_hz", cls.rate_hz, gt=0)
-        noise = sec.number("noise_urad", cls.noise_urad, ge=0)
+        cut = sec.number("cutoff_hz", cls.cutoff_hz, gt=0, le=MAX_FREQUENCY_HZ)
+        rate = sec.number("rate_hz", cls.rate_hz, gt=0, le=MAX_SAMPLE_RATE_HZ)
+        noise = sec.number("noise_urad", cls.noise_urad, ge=0, le=MAX_AMPLITUDE_URAD)
         sec.finish()
         return cls(cut, rate, noise)
 
@@ -565,8 +581,8 @@ class StarTrackerConfig:
     @classmethod
     def from_section(cls, sec: Section) -> "StarTrackerConfig":
         en = sec.boolean("enabled", cls.enabled)
-        rate = sec.number("rate_hz", cls.rate_hz, gt=0)
-        noise = sec.number("noise_urad", cls.noise_urad, ge=0)
+        rate = sec.number("rate_hz", cls.rate_hz, gt=0, le=MAX_SAMPLE_RATE_HZ)
+        noise = sec.number("noise_urad", cls.noise_urad, ge=0, le=MAX_AMPLITUDE_URAD)
         sec.finish()
         return cls(en, rate, noise)
 

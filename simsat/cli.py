@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -39,11 +40,18 @@ def _parse_set(items: list[str] | None) -> dict:
             parsed = tomllib.loads(f"v = {value}")["v"]
         except Exception:
             parsed = value
+        path: list = []
+        for part in key.strip().split("."):
+            m = re.fullmatch(r"([A-Za-z0-9_-]+)((?:\[\d+\])*)", part)
+            if not m:
+                raise CliError(f"--set {item!r}: {part!r} is not a key name (KEY or KEY[INDEX], e.g. "
+                               f"attitude.jitter[0].amplitude_urad=2.0)")
+            path.append(m.group(1))
+            path.extend(int(i) for i in re.findall(r"\[(\d+)\]", m.group(2)))
         d = out
-        parts = key.strip().split(".")
-        for p in parts[:-1]:
+        for p in path[:-1]:
             d = d.setdefault(p, {})
-        d[parts[-1]] = parsed
+        d[path[-1]] = parsed
     return out
 
 

@@ -82,7 +82,9 @@ class Section:
         self._read.add(name)
         if name not in self.data:
             if default is REQUIRED:
-                raise self.error(name, "missing (required)")
+                near = _near(name, [k for k in self.data if k not in self._read])
+                hint = f"; found unknown key {self.key(near)!r}: a misspelling?" if near else ""
+                raise self.error(name, f"missing (required){hint}")
             return default
         return self.data[name]
 
@@ -204,7 +206,17 @@ class Section:
         unknown = [k for k in self.data if k not in allowed]
         if unknown:
             k = unknown[0]
-            raise self.error(k, "unknown key; allowed here: " + (", ".join(sorted(allowed)) or "(none)"))
+            near = _near(k, sorted(allowed))
+            hint = f" (did you mean {near!r}?)" if near else ""
+            raise self.error(k, f"unknown key{hint}; allowed here: " + (", ".join(sorted(allowed)) or "(none)"))
+
+
+def _near(name: str, candidates: Sequence[str]) -> str | None:
+    """The candidate closest to ``name`` when it looks like a misspelling of it."""
+    import difflib
+
+    m = difflib.get_close_matches(str(name), [str(c) for c in candidates], n=1, cutoff=0.75)
+    return m[0] if m else None
 
 
 def _check_bounds(sec: Section, name: str, value: float, gt, ge, lt, le) -> None:

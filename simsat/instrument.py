@@ -141,20 +141,20 @@ class Instrument:
 
 def instrument_from_config(sec: Section) -> Instrument:
     """Build an :class:`Instrument` from the ``[instrument]`` table."""
-    f = sec.number("focal_length_m", gt=0)
-    te = sec.number("line_period_ms", gt=0) * 1e-3
-    default_pitch_um = sec.number("pixel_pitch_um", None, gt=0)
-    default_pixels = sec.integer("pixels", None, gt=0)
-    width = sec.number("focal_plane_width_mm", 100.0, gt=0) * 1e-3
-    height = sec.number("focal_plane_height_mm", 20.0, gt=0) * 1e-3
+    f = sec.number("focal_length_m", ge=1e-3, le=1000.0)
+    te = sec.number("line_period_ms", ge=1e-3, le=1e4) * 1e-3
+    default_pitch_um = sec.number("pixel_pitch_um", None, ge=0.1, le=1e4)
+    default_pixels = sec.integer("pixels", None, gt=0, le=100_000)
+    width = sec.number("focal_plane_width_mm", 100.0, gt=0, le=1e4) * 1e-3
+    height = sec.number("focal_plane_height_mm", 20.0, gt=0, le=1e4) * 1e-3
     mtf = sec.number("mtf_nyquist", 0.3, gt=0, le=1)
     nt = sec.integer("time_subsamples", 4, ge=1, le=64)
     ns = sec.integer("spatial_subsamples", 1, ge=1, le=8)
     rsec = sec.section("noise")
     rad = Radiometry(
-        full_well_e=rsec.number("full_well_e", 60000.0, gt=0),
+        full_well_e=rsec.number("full_well_e", 60000.0, ge=1, le=1e9),
         signal_fraction=rsec.number("signal_fraction", 0.6, gt=0, le=1),
-        read_noise_e=rsec.number("read_noise_e", 40.0, ge=0),
+        read_noise_e=rsec.number("read_noise_e", 40.0, ge=0, le=1e6),
         bits=rsec.integer("bits", 12, ge=1, le=16),
         enabled=rsec.boolean("enabled", True),
     )
@@ -170,10 +170,10 @@ def instrument_from_config(sec: Section) -> Instrument:
         band = ds.string("band", choices=SPECTRAL_BANDS)
         along = ds.number("along_track_mm") * 1e-3
         across = ds.number("across_track_mm", 0.0) * 1e-3
-        pixels = ds.integer("pixels", default_pixels, gt=0)
+        pixels = ds.integer("pixels", default_pixels, gt=0, le=100_000)
         if pixels is None:
             raise ds.error("pixels", "missing (required, or set instrument.pixels)")
-        pitch = ds.number("pixel_pitch_um", default_pitch_um, gt=0)
+        pitch = ds.number("pixel_pitch_um", default_pitch_um, ge=0.1, le=1e4)
         if pitch is None:
             raise ds.error("pixel_pitch_um", "missing (required, or set instrument.pixel_pitch_um)")
         pitch *= 1e-6

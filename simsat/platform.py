@@ -71,8 +71,8 @@ class Platform:
 
 def platform_from_config(sec: Section) -> Platform:
     """Build a :class:`Platform` from the ``[platform]`` table (not yet centred)."""
-    h = sec.number("altitude_m", gt=1000.0)
-    v = sec.number("ground_speed_m_s", gt=0)
+    h = sec.number("altitude_m", gt=1000.0, le=5e7)  # up to beyond geostationary (3.6e7 m)
+    v = sec.number("ground_speed_m_s", gt=0, le=2e4)  # LEO ground speed is ~7e3 m/s
     roll = np.deg2rad(sec.number("off_nadir_roll_deg", 0.0, ge=-45, le=45))
     pitch = np.deg2rad(sec.number("off_nadir_pitch_deg", 0.0, ge=-45, le=45))
     sec.finish()

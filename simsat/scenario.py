@@ -233,7 +233,10 @@ def load_scenario(source: str | Path | dict, *, overrides: dict | None = None, c
         raw = _read_toml(path)
         base_dir = path.resolve().parent
     if overrides:
-        _merge(raw, overrides)
+        try:
+            _merge(raw, overrides)
+        except ScenarioError as e:
+            raise ScenarioError(f"--set {e}") from None
     try:
         sc = _build(raw, path, base_dir)
         if check_models:
@@ -245,10 +248,26 @@ def load_scenario(source: str | Path | dict, *, overrides: dict | None = None, c
     return sc
 
 
-def _merge(base: dict, over: dict) -> None:
+def _merge(base: dict | list, over: dict, where: str = "") -> None:
+    """Merge overrides into a raw scenario; integer keys index arrays of tables (``jitter[0]``)."""
     for k, v in over.items():
-        if isinstance(v, dict) and isinstance(base.get(k), dict):
-            _merge(base[k], v)
+        key = f"{where}[{k}]" if isinstance(k, int) else (f"{where}.{k}" if where else str(k))
+        if isinstance(k, int):
+            if not isinstance(base, list):
+                raise ScenarioError(f"{key}: not an array in the scenario, cannot be indexed")
+            if not 0 <= k < len(base):
+                raise ScenarioError(f"{key}: index out of range (the array has {len(base)} entries)")
+        elif isinstance(base, list):
+            raise ScenarioError(f"{where}: is an array; index it as {where}[0].{k}")
+        cur = base[k] if isinstance(k, int) else base.get(k)
+        if isinstance(v, dict) and isinstance(cur, (dict, list)) and (isinstance(cur, dict) or
+                                                                      all(isinstance(i, int) for i in v)):
+            _merge(cur, v, key)
+        elif isinstance(v, dict) and isinstance(cur, list):
+            first = next(iter(v))
+            raise ScenarioError(f"{key}: is an array of tables; index it, e.g. {key}[0].{first}")
+        elif isinstance(v, dict) and any(isinstance(i, int) for i in v):
+            raise ScenarioError(f"{key}: not an array in the scenario, cannot be indexed")
         else:
             base[k] = v
 
@@ -271,17 +290,18 @@ def _build(raw: dict, path: Path | None, base_dir: Path) -> Scenario:
     instrument = instrument_from_config(root.section("instrument", required=True))
 
     acq = root.section("acquisition", required=True)
-    lines = acq.integer("lines", gt=8)
+    lines = acq.integer("lines", gt=8, le=MAX_LINES)
     block = acq.integer("block_lines", 256, gt=0)
     ref = acq.string("reference_detector", instrument.detectors[0].name, choices=instrument.names)
-    t0 = acq.number("start_time_s", 0.0)
-    margin_m = acq.number("scene_margin_m", 300.0, ge=0)
+    t0 = acq.number("start_time_s", 0.0, ge=-1e9, le=1e9)
+    margin_m = acq.number("scene_margin_m", 300.0, ge=0, le=1e5)
     acq.finish()
     acquisition = Acquisition(lines=lines, block_lines=block, reference_detector=ref, t0_s=t0)
 
     # sections read by later stages: only their presence/type is checked here
-    for k in ("scene", "attitude", "restoration", "report"):
+    for k in ("scene", "attitude", "restoration"):
         root.section(k, required=k in ("scene", "attitude"))
+    root.section("report").finish()  # the report reads no key of it yet: any key is a mistake
     root.finish()
 
     # centre the platform: the mean detector line of sight hits (0, 0) at mid-acquisition
@@ -300,6 +320,7 @@ def _build(raw: dict, path: Path | None, base_dir: Path) -> Scenario:
         for u in (-0.5, d.pixels - 0.5):
             ys.append(platform.y_m + h * np.tan(platform.off_nadir_roll_rad + np.arctan(d.focal_plane_y(u) / f)))
     margin = margin_m + 0.0
+    _check_extent(float(xs.max() - xs.min()), float(max(ys) - min(ys)))
     sc = Scenario(name=name, seed=seed, description=description, platform=platform, instrument=instrument,
                   acquisition=acquisition, raw=raw, source=path, base_dir=base_dir,
                   x_range_m=(float(xs.min() - margin), float(xs.max() + margin)),
@@ -307,8 +328,81 @@ def _build(raw: dict, path: Path | None, base_dir: Path) -> Scenario:
     return sc
 
 
+# --------------------------------------------------------------------------- resource budget
+MAX_LINES = 10_000_000            #: acquisition.lines
+MAX_ALONG_TRACK_M = 2.0e6         #: length of the imaged strip
+MAX_SWATH_M = 1.0e6               #: width of the imaged swath
+MAX_RAYS = 2.0e10                 #: rays traced by a render (about a day on 2 cores)
+MAX_PRODUCT_BYTES = 32e9          #: raw images in product.nc (uint16)
+MAX_DEM_SAMPLES = 16_000_000      #: samples of a generated DEM (memory: ~10 arrays of it)
+MAX_PSD_WORK = 4e9                #: psd jitter: components × truth samples
+MIN_TEXELS_PER_PIXEL = 1 / 16     #: texel no finer than 1/16 of the ground sample
+
+
+def _check_extent(along_m: float, across_m: float) -> None:
+    """Refuse a footprint no render could hold, naming the keys that make it."""
+    if not along_m <= MAX_ALONG_TRACK_M:
+        raise ScenarioError(f"acquisition.lines: the strip is {along_m / 1e3:.3g} km long (acquisition.lines × "
+                            f"instrument.line_period_ms × platform.ground_speed_m_s), more than "
+                            f"{MAX_ALONG_TRACK_M / 1e3:.0f} km")
+    if not across_m <= MAX_SWATH_M:
+        raise ScenarioError(f"instrument.pixels: the swath is {across_m / 1e3:.3g} km wide (pixels × "
+                            f"pixel_pitch_um / focal_length_m × platform.altitude_m), more than "
+                            f"{MAX_SWATH_M / 1e3:.0f} km")
+
+
+def _check_resources(sc: Scenario) -> None:
+    """Estimate what a render will allocate and trace before anything is built.
+
+    Each limit names the key that drives it; the built-in scenarios (phr_full:
+    4 × 7000 × 7000; a 50 000-line phr_cmg) are far inside them.
+    """
+    inst = sc.instrument
+    lines = sc.acquisition.lines
+    pixels = sum(d.pixels for d in inst.detectors)
+    rays = float(lines) * pixels * inst.time_subsamples * inst.spatial_subsamples ** 2
+    if rays > MAX_RAYS:
+        raise ScenarioError(f"acquisition.lines: {lines} lines × {pixels} pixels of all bands × "
+                            f"instrument.time_subsamples {inst.time_subsamples} × spatial_subsamples² "
+                            f"{inst.spatial_subsamples ** 2} = {rays:.3g} rays to trace (> {MAX_RAYS:.0e})")
+    nbytes = 2.0 * lines * pixels
+    if nbytes > MAX_PRODUCT_BYTES:
+        raise ScenarioError(f"acquisition.lines: {lines} lines × {pixels} pixels of all bands make a "
+                            f"{nbytes / 1e9:.3g} GB product (> {MAX_PRODUCT_BYTES / 1e9:.0f} GB)")
+    scene = sc.raw.get("scene", {}) if isinstance(sc.raw.get("scene"), dict) else {}
+    dem = scene.get("dem", {}) if isinstance(scene.get("dem"), dict) else {}
+    res = dem.get("resolution_m", 10.0 if dem.get("kind", "fractal") == "fractal" else None)
+    if isinstance(res, (int, float)) and not isinstance(res, bool) and res > 0:
+        nx = (sc.x_range_m[1] - sc.x_range_m[0]) / res + 1
+        ny = (sc.y_range_m[1] - sc.y_range_m[0]) / res + 1
+        if nx * ny > MAX_DEM_SAMPLES:
+            raise ScenarioError(f"scene.dem.resolution_m: {res:g} m over the {nx * res / 1e3:.3g} × "
+                                f"{ny * res / 1e3:.3g} km scene gives {nx * ny:.3g} DEM samples "
+                                f"(> {MAX_DEM_SAMPLES / 1e6:.0f} M); use a coarser resolution or a shorter "
+                                f"acquisition (acquisition.lines)")
+    tex = scene.get("texture", {}) if isinstance(scene.get("texture"), dict) else {}
+    texel = tex.get("texel_m")
+    gsd = inst.ifov_rad(sc.acquisition.reference_detector) * sc.platform.altitude_m
+    if isinstance(texel, (int, float)) and not isinstance(texel, bool) and 0 < texel < gsd * MIN_TEXELS_PER_PIXEL:
+        raise ScenarioError(f"scene.texture.texel_m: {texel:g} m is finer than 1/16 of the ground sample "
+                            f"({gsd:.3g} m): the texture would be evaluated "
+                            f"{(gsd / texel) ** 2:.3g} times per pixel; use >= {gsd / 16:.3g} m")
+    att = sc.raw.get("attitude", {}) if isinstance(sc.raw.get("attitude"), dict) else {}
+    jit = att.get("jitter", [])
+    jit = [jit] if isinstance(jit, dict) else (jit if isinstance(jit, list) else [])
+    samples = float(lines) * max(inst.time_subsamples, 2) + 1000
+    for i, j in enumerate(jit):
+        if isinstance(j, dict) and j.get("kind") == "psd":
+            n = j.get("n_components", 400)
+            if isinstance(n, (int, float)) and n * samples > MAX_PSD_WORK:
+                raise ScenarioError(f"attitude.jitter[{i}].n_components: {n:g} components × {samples:.3g} truth "
+                                    f"samples = {n * samples:.3g} sine evaluations (> {MAX_PSD_WORK:.0e}); "
+                                    f"use fewer components")
+
+
 def _validate_models(sc: Scenario) -> None:
     """Validate the tables built by other modules (attitude, terrain) without heavy work."""
+    _check_resources(sc)
     sc.attitude_model()
     scene = sc.section("scene")
     for k in ("dem", "dem_knowledge", "texture", "sun"):

@@ -537,7 +537,7 @@ def test_dem_from_config_fractal(tmp_path):
 
 
 @pytest.mark.parametrize("data, message", [
-    ({"resolution_m": -3}, "scene.dem.resolution_m: must be > 0, got -3"),
+    ({"resolution_m": -3}, "scene.dem.resolution_m: must be >= 0.1, got -3"),
     ({"relief_m": "high"}, "scene.dem.relief_m: must be a number"),
     ({"roughness": 2.0}, "scene.dem.roughness: must be <= 1, got 2"),
     ({"kind": "lidar"}, "scene.dem.kind: must be one of"),
@@ -592,7 +592,7 @@ def test_sun_from_config():
     sun = sun_from_config(Section({"elevation_deg": 35, "azimuth_deg": -20.0, "ambient": 0.1}, "scene.sun"))
     assert (sun.elevation_deg, sun.azimuth_deg, sun.ambient, sun.cast_shadows) == (35.0, -20.0, 0.1, True)
     assert sun_from_config(Section({}, "scene.sun")) == Sun()
-    with pytest.raises(ScenarioError, match=r"^scene\.sun\.elevation_deg: must be > 0, got 0"):
+    with pytest.raises(ScenarioError, match=r"^scene\.sun\.elevation_deg: must be >= 1, got 0"):
         sun_from_config(Section({"elevation_deg": 0}, "scene.sun"))
     with pytest.raises(ScenarioError, match=r"^scene\.sun\.ambient: must be <= 1"):
         sun_from_config(Section({"ambient": 1.5}, "scene.sun"))
@@ -614,7 +614,7 @@ def test_texture_from_config(tmp_path):
         ({"water_fraction": 0.6, "urban_fraction": 0.3, "forest_fraction": 0.3},
          "scene.texture.forest_fraction: water_fraction + urban_fraction + forest_fraction must be <= 1"),
         ({"bands": ["red", "swir"]}, "scene.texture.bands[1]: must be one of"),
-        ({"texel_m": 0}, "scene.texture.texel_m: must be > 0, got 0"),
+        ({"texel_m": 0}, "scene.texture.texel_m: must be >= 0.01, got 0"),
         ({"kind": "orthoimage", "channels": {"red": 0}}, "scene.texture.path: missing (required)"),
         ({"kind": "orthoimage", "path": "o.png", "channels": {"red": 0}},
          f"scene.texture.path: file not found: {tmp_path / 'o.png'}"),

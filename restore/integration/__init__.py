@@ -44,7 +44,8 @@ from .transfer import (blind_frequencies, chain_gain, fused_chain_gain, fused_ga
                        pair_transfer, wiener_gain)
 from .wiener import integrate_inverse, integrate_wiener, integrate_wiener_fft
 
-__all__ = ["integrate", "METHODS", "DEFAULT_METHOD", "coverage", "observed_mask",
+__all__ = ["integrate", "METHODS", "DEFAULT_METHOD", "method_function", "method_options", "check_options",
+           "PIPELINE_OPTIONS", "coverage", "observed_mask",
            "fill_from_differentials", "interpolate_gaps", "pair_transfer", "wiener_gain",
            "chain_gain", "blind_frequencies", "fused_gains", "fused_chain_gain",
            "integrate_wiener", "integrate_wiener_fft", "integrate_inverse", "gaps", "spectrum",
@@ -75,6 +76,122 @@ METHODS: dict[str, Callable] = {
 }
 
 
+#: options the pipeline supplies itself from the data (not settable in a scenario)
+PIPELINE_OPTIONS = frozenset({"weights", "lags", "sigmas", "return_details"})
+
+
+def method_function(name: str) -> Callable:
+    """The function implementing integration method ``name`` (lazy imports resolved)."""
+    import importlib
+
+    if name not in METHODS:
+        raise ValueError(f"method: must be one of {', '.join(sorted(METHODS))}; got {name!r}")
+    f = METHODS[name]
+    doc = f.__doc__ or ""
+    if doc.startswith("See :func:`restore.integration."):
+        module, func = doc.split("`")[1].rsplit(".", 1)
+        f = getattr(importlib.import_module(module), func)
+    return f
+
+
+def method_options(name: str) -> dict:
+    """Keyword options of method ``name`` a scenario may set, with their defaults."""
+    import inspect
+
+    sig = inspect.signature(method_function(name))
+    return {p.name: p.default for p in sig.parameters.values()
+            if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name not in PIPELINE_OPTIONS}
+
+
+def _check_value(value, default, key: str) -> None:
+    import math
+
+    if isinstance(value, bool) or isinstance(default, bool):
+        if default is not None and isinstance(default, bool) != isinstance(value, bool):
+            raise ValueError(f"{key}: must be {'true or false' if isinstance(default, bool) else 'a number'}, "
+                             f"got {value!r}")
+        return
+    if isinstance(value, (int, float)):
+        if not math.isfinite(value):
+            raise ValueError(f"{key}: must be finite, got {value!r}")
+        if value < 0:
+            raise ValueError(f"{key}: must be >= 0, got {value!r}")
+        if isinstance(default, int) and not isinstance(default, bool) and not float(value).is_integer():
+            raise ValueError(f"{key}: must be an integer, got {value!r}")
+        return
+    if isinstance(default, (int, float)) and default is not None:
+        raise ValueError(f"{key}: must be a number, got {type(value).__name__} {value!r}")
+    if isinstance(value, list):
+        if not value:
+            raise ValueError(f"{key}: must not be an empty array")
+        for i, v in enumerate(value):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{key}[{i}]: must be a finite number, got {v!r}")
+        return
+    if isinstance(value, dict):
+        for k, v in value.items():
+            if isinstance(v, (int, float, list)):
+                _check_value(v, None, f"{key}.{k}")
+        return
+    if isinstance(value, str):
+        raise ValueError(f"{key}: must be a number, an array of numbers or a table, got string {value!r}")
+
+
+def check_options(name: str | None, options: dict, *, where: str = "restoration.integration") -> dict:
+    """Check a method's options as a scenario gives them; return them unchanged.
+
+    Parameters
+    ----------
+    name : str or None
+        Integration method (None: :data:`DEFAULT_METHOD`).
+    options : dict
+        Option name → value.
+    where : str
+        Dotted key path of the options table, for the messages.
+
+    Raises
+    ------
+    ValueError
+        Naming ``where.option``: an option the method does not take (with the
+        ones it does), or a value of the wrong type, not finite or negative.
+    """
+    import difflib
+
+    name = DEFAULT_METHOD if name is None else name
+    allowed = method_options(name)
+    for key, value in options.items():
+        if key not in allowed:
+            near = difflib.get_close_matches(key, list(allowed), n=1)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise ValueError(f"{where}.{key}: not an option of the {name!r} integration method{hint}; "
+                             f"its options: {', '.join(sorted(allowed)) or '(none)'}")
+        _check_value(value, allowed[key], f"{where}.{key}")
+    return options
+
+
+def _check_taus(diffs, taus, dt) -> None:
+    import math
+
+    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt: must be a finite sampling step > 0 [s], got {dt!r}")
+    try:
+        taus = list(np.atleast_1d(np.asarray(taus, dtype=np.float64)))
+    except (TypeError, ValueError):
+        raise ValueError(f"taus: must be a sequence of lags [s], got {taus!r}") from None
+    if len(diffs) and np.ndim(diffs[0]) == 0:
+        diffs = [diffs]  # one series given as a single array
+    if len(taus) != len(diffs):
+        raise ValueError(f"taus: one lag per differential series expected, got {len(taus)} lags "
+                         f"for {len(diffs)} series")
+    n = len(diffs[0]) if len(diffs) else 0
+    for j, tau in enumerate(taus):
+        if not (math.isfinite(tau) and tau > 0):
+            raise ValueError(f"taus[{j}]: must be a finite lag > 0 [s], got {tau!r}")
+        if n and tau >= n * dt:
+            raise ValueError(f"taus[{j}]: lag {tau:g} s is not shorter than the record ({n} samples × "
+                             f"{dt:g} s = {n * dt:g} s); lags are in seconds")
+
+
 def integrate(diffs, taus, dt, method: str | None = None, **options) -> np.ndarray:
     """Integrate attitude differentials back to the attitude.
 
@@ -100,4 +217,5 @@ def integrate(diffs, taus, dt, method: str | None = None, **options) -> np.ndarr
     name = DEFAULT_METHOD if method is None else method
     if name not in METHODS:
         raise ValueError(f"method: must be one of {', '.join(sorted(METHODS))}; got {method!r}")
+    _check_taus(diffs, taus, dt)
     return METHODS[name](diffs, taus, dt, **options)

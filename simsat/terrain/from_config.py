@@ -101,8 +101,8 @@ def dem_from_config(section: Section, *, base_dir, seed: int, x_range_m, y_range
     """
     kind = section.string("kind", "fractal", choices=("fractal", "geotiff", "matplotlib_sample"))
     if kind == "fractal":
-        res = section.number("resolution_m", 10.0, gt=0)
-        relief = section.number("relief_m", 150.0, ge=0)
+        res = section.number("resolution_m", 10.0, ge=0.1, le=10000.0)
+        relief = section.number("relief_m", 150.0, ge=0, le=20000.0)  # Earth: < 9 km
         rough = section.number("roughness", 0.7, gt=0, le=1)
         section.finish()
         try:
@@ -158,9 +158,9 @@ def knowledge_dem_from_config(section: Section, *, truth: Dem, seed: int) -> Dem
     seed : int
         Scenario seed (the error uses its own random stream).
     """
-    noise = section.number("noise_m", 0.0, ge=0)
-    bias = section.number("bias_m", 0.0)
-    corr = section.number("correlation_m", 0.0, ge=0)
+    noise = section.number("noise_m", 0.0, ge=0, le=1000.0)
+    bias = section.number("bias_m", 0.0, ge=-1e4, le=1e4)
+    corr = section.number("correlation_m", 0.0, ge=0, le=1e6)
     section.finish()
     try:
         return truth.with_error(noise_m=noise, bias_m=bias, correlation_m=corr, seed=seed)
@@ -170,8 +170,8 @@ def knowledge_dem_from_config(section: Section, *, truth: Dem, seed: int) -> Dem
 
 def sun_from_config(section: Section) -> Sun:
     """Sun geometry from ``[scene.sun]``."""
-    sun = Sun(elevation_deg=section.number("elevation_deg", 45.0, gt=0, le=90),
-              azimuth_deg=section.number("azimuth_deg", 135.0),
+    sun = Sun(elevation_deg=section.number("elevation_deg", 45.0, ge=1.0, le=90),  # below 1°: shadows unbounded
+              azimuth_deg=section.number("azimuth_deg", 135.0, ge=-360, le=360),
               ambient=section.number("ambient", 0.2, ge=0, le=1),
               cast_shadows=section.boolean("cast_shadows", True))
     section.finish()
@@ -201,7 +201,7 @@ def texture_from_config(section: Section, *, base_dir, seed: int, sun: Sun | Non
     ProceduralTexture or OrthoTexture
     """
     kind = section.string("kind", "procedural", choices=("procedural", "orthoimage"))
-    texel = section.number("texel_m", 1.0, gt=0)
+    texel = section.number("texel_m", 1.0, ge=0.01, le=1000.0)
     bands = section.strings("bands", None, choices=BAND_NAMES)
     if bands is not None and len(set(bands)) != len(bands):
         raise section.error("bands", f"repeated band in {list(bands)}")
@@ -214,8 +214,8 @@ def texture_from_config(section: Section, *, base_dir, seed: int, sun: Sun | Non
             cloud_fraction=section.number("cloud_fraction", 0.0, ge=0, le=1),
             urban_fraction=section.number("urban_fraction", 0.08, ge=0, le=1),
             forest_fraction=section.number("forest_fraction", 0.25, ge=0, le=1),
-            field_size_m=section.number("field_size_m", 200.0, gt=10),
-            cloud_height_m=section.number("cloud_height_m", 1500.0, gt=0),
+            field_size_m=section.number("field_size_m", 200.0, gt=10, le=1e5),
+            cloud_height_m=section.number("cloud_height_m", 1500.0, gt=0, le=20000.0),
         )
         section.finish()
         try:
