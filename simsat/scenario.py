@@ -281,8 +281,8 @@ def _build(raw: dict, path: Path | None, base_dir: Path) -> Scenario:
     requirement = {}
     req = meta.section("requirement")
     if req.data:
-        requirement["max_rms_px"] = req.number("max_rms_px", None, gt=0)
-        requirement["max_p997_px"] = req.number("max_p997_px", None, gt=0)
+        requirement["max_rms_px"] = req.number("max_rms_px", None, gt=0, le=1000)
+        requirement["max_p997_px"] = req.number("max_p997_px", None, gt=0, le=1000)
         req.finish()
     meta.finish()
 
@@ -291,7 +291,7 @@ def _build(raw: dict, path: Path | None, base_dir: Path) -> Scenario:
 
     acq = root.section("acquisition", required=True)
     lines = acq.integer("lines", gt=8, le=MAX_LINES)
-    block = acq.integer("block_lines", 256, gt=0)
+    block = acq.integer("block_lines", 256, gt=0, le=65536)
     ref = acq.string("reference_detector", instrument.detectors[0].name, choices=instrument.names)
     t0 = acq.number("start_time_s", 0.0, ge=-1e9, le=1e9)
     margin_m = acq.number("scene_margin_m", 300.0, ge=0, le=1e5)
