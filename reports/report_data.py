@@ -147,7 +147,7 @@ def read_product_light(path) -> tuple:
     from simsat.attitude import AttitudeSeries
     from simsat.instrument import Detector, Instrument, Radiometry
     from simsat.platform import Platform
-    from simsat.product import Product, ProductError
+    from simsat.product import Product, ProductError, check_product
     from simsat.terrain import Dem
 
     p = Path(path)
@@ -157,9 +157,12 @@ def read_product_light(path) -> tuple:
         raise ProductError(f"{p}: product file not found (run `simsat render SCENARIO --out DIR` first)")
     try:
         with xr.open_dataset(p, engine="netcdf4") as lazy:
+            check_product(lazy, p)
             img = [v for v in lazy.data_vars if str(v).startswith("image_")]
             shapes = {str(v)[len("image_"):]: tuple(int(n) for n in lazy[v].shape) for v in img}
             ds = lazy.drop_vars(img).load()
+    except ProductError:
+        raise
     except Exception as e:
         raise ProductError(f"{p}: cannot read as NetCDF ({type(e).__name__}: {e})") from None
     try:
@@ -209,6 +212,31 @@ def _open_optional(path: Path, notes: list, what: str):
         return None
 
 
+def _read_truth_checked(path: Path, product_time: np.ndarray):
+    """``truth.nc`` with its axes present, finite and covering the product's lines."""
+    import xarray as xr
+
+    from simsat.product import ProductError
+
+    try:
+        truth = xr.load_dataset(path, engine="netcdf4")
+    except Exception as e:
+        raise ProductError(f"{path}: cannot read as NetCDF ({type(e).__name__}: {e})") from None
+    for name in ("time",) + AXES:
+        if name not in truth.variables:
+            raise ProductError(f"{path}: no variable {name!r} (truth needs time, roll, pitch, yaw)")
+        v = np.asarray(truth[name].values, dtype=np.float64)
+        if v.ndim != 1 or v.size < 2 or not np.isfinite(v).all():
+            raise ProductError(f"{path}: variable {name!r} must be a finite series over 'time'")
+    t = np.asarray(truth["time"].values, dtype=np.float64)
+    if np.any(np.diff(t) <= 0):
+        raise ProductError(f"{path}: variable 'time' must increase strictly")
+    if t[0] > product_time[0] + 1e-9 or t[-1] < product_time[-1] - 1e-9:
+        raise ProductError(f"{path}: truth covers [{t[0]:.6g}, {t[-1]:.6g}] s, not the product's lines "
+                           f"[{product_time[0]:.6g}, {product_time[-1]:.6g}] s: another run's truth")
+    return truth
+
+
 def load_run(run_dir) -> RunData:
     """Read a run directory: product (without images), restoration, truth, run.json.
 
@@ -217,32 +245,34 @@ def load_run(run_dir) -> RunData:
     simsat.product.ProductError
         When ``product.nc`` is missing or malformed (the only required file).
     """
+    from restore.restoration_io import check_restoration, open_restoration
+    from simsat.product import ProductError
+
     run_dir = Path(run_dir)
     notes: list = []
-    try:
-        product, shapes = read_product_light(run_dir)
-    except Exception as e:  # fall back on the reference reader (loads the images)
-        from simsat.product import ProductError, read_product
-
-        if isinstance(e, ProductError) and "not found" in str(e):
-            raise
-        product = read_product(run_dir)
-        shapes = {n: tuple(product.ds[f"image_{n}"].shape) for n in product.band_names
-                  if f"image_{n}" in product.ds}
-    rest = _open_optional(run_dir / "restoration.nc", notes, "the restoration")
-    if rest is None and not any("restoration.nc" in n for n in notes):
+    product, shapes = read_product_light(run_dir)
+    rest = None
+    if (run_dir / "restoration.nc").exists():
+        rest = open_restoration(run_dir / "restoration.nc")
+        check_restoration(rest, run_dir / "restoration.nc", product_time=product.time)
+    else:
         notes.append("No restoration.nc in the run: run `simsat restore RUN_DIR` for the restored attitude; "
                      "only the product (and truth) are shown.")
-    truth = _open_optional(run_dir / "truth.nc", notes, "truth")
-    if truth is None and not any("truth.nc" in n for n in notes):
+    truth = None
+    if (run_dir / "truth.nc").exists():
+        truth = _read_truth_checked(run_dir / "truth.nc", product.time)
+    else:
         notes.append("No truth.nc (a real product): errors, spectra of truth and error, the measured transfer "
                      "and the error budget rows that need truth are left out.")
     info = {}
     if (run_dir / "run.json").exists():
         try:
             info = json.loads((run_dir / "run.json").read_text())
-        except (json.JSONDecodeError, OSError) as e:
-            notes.append(f"run.json could not be read ({e}); scenario details from the product only.")
+        except (json.JSONDecodeError, OSError, UnicodeDecodeError) as e:
+            raise ProductError(f"{run_dir / 'run.json'}: not a readable JSON file ({e})") from None
+        if not isinstance(info, dict):
+            raise ProductError(f"{run_dir / 'run.json'}: must hold a JSON object (simsat's run record), "
+                               f"got {type(info).__name__}")
     return RunData(run_dir=run_dir, product=product, image_shapes=shapes, restoration=rest, truth=truth,
                    run_info=info, notes=notes, has_corrected=(run_dir / "corrected.nc").exists())
 

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from simsat.config import ScenarioError, Section
-from simsat.product import Product, atomic_write_dataset, clamped_attitude, read_product
+from simsat.product import Product, ProductError, atomic_write_dataset, clamped_attitude, read_product
 from simsat.rundir import RunLock, content_id
 
 from .synthesis import AXES, drop_sparse, fill_short_gaps, highpass_nan, instant_synthesis, window_compensation
@@ -693,17 +693,32 @@ def _settings_dict(s: RestorationSettings) -> dict:
     return d
 
 
+def _restoration_table(run_json: Path) -> dict:
+    """The ``[restoration]`` table of the scenario recorded in ``run.json``."""
+    try:
+        info = json.loads(run_json.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ProductError(f"{run_json}: not a readable JSON file ({e}); render the run again or remove it") from None
+    if not isinstance(info, dict):
+        raise ProductError(f"{run_json}: must hold a JSON object (simsat's run record), got {type(info).__name__}")
+    table = info.get("scenario", {})
+    for k in ("raw", "restoration"):
+        table = table.get(k, {}) if isinstance(table, dict) else None
+    if table is None or not isinstance(table, dict):
+        raise ProductError(f"{run_json}: scenario.raw.restoration must be a table, got {type(table).__name__}")
+    return table
+
+
 def restore_run(run_dir: str | Path, *, overrides: dict | None = None, progress: bool = True) -> RestorationResult:
     """``simsat restore RUN_DIR``: read the product, restore, write restoration.nc (+ corrected.nc)."""
     run_dir = Path(run_dir)
+    if run_dir.exists() and not run_dir.is_dir():
+        raise ProductError(f"{run_dir}: is a file; expected a run directory (the one holding product.nc)")
     product = read_product(run_dir)
     table = {}
     run_json = run_dir / "run.json"
     if run_json.exists():
-        try:
-            table = json.loads(run_json.read_text()).get("scenario", {}).get("raw", {}).get("restoration", {}) or {}
-        except json.JSONDecodeError:
-            table = {}
+        table = _restoration_table(run_json)
     if overrides:
         ov = overrides.get("restoration", overrides)
         table = {**table, **ov}

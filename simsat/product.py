@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["atomic_write_dataset", "atomic_write_json", "atomic_write_bytes", "Product", "read_product",
-           "read_truth", "ProductError", "NETCDF_ENCODING", "clamped_attitude"]
+           "read_truth", "ProductError", "NETCDF_ENCODING", "clamped_attitude", "check_product", "check_image"]
 
 
 class ProductError(ValueError):
@@ -151,11 +151,20 @@ class Product:
         return self.instrument.ifov_rad(self.reference_detector)
 
     def image(self, name: str) -> np.ndarray:
-        """Band image as float32 (DN)."""
+        """Band image as float32 (DN).
+
+        Raises
+        ------
+        ProductError
+            The band is missing, or its content cannot be an image (non-finite
+            values, every pixel zero), naming the file and the variable.
+        """
         key = f"image_{name}"
         if key not in self.ds:
             raise ProductError(f"{self.path}: no variable {key!r} (bands: {', '.join(self.band_names)})")
-        return np.asarray(self.ds[key].values, dtype=np.float32)
+        img = np.asarray(self.ds[key].values, dtype=np.float32)
+        check_image(img, f"{self.path}: {key}")
+        return img
 
     def sensor_model(self, attitude=None):
         """Sensor model with the product's geometry (default attitude: knowledge)."""
@@ -166,6 +175,82 @@ class Product:
 
     def delay_s(self, ahead: str, behind: str) -> float:
         return self.sensor_model().nominal_delay_s(ahead, behind)
+
+
+def check_image(img: np.ndarray, where: str) -> None:
+    """Refuse an image no instrument could have delivered (``where`` names file and variable)."""
+    if img.size == 0:
+        raise ProductError(f"{where}: empty image")
+    finite = np.isfinite(img)
+    if not finite.all():
+        bad = np.flatnonzero(~finite.all(axis=1)) if img.ndim == 2 else np.array([0])
+        raise ProductError(f"{where}: {int((~finite).sum())} non-finite pixels (first on line {int(bad[0])}); "
+                           f"a raw image holds finite DN")
+    if not np.any(img):
+        raise ProductError(f"{where}: every pixel is 0 (a dead band or a corrupt file)")
+
+
+_REQUIRED_ATTRS = ("t0_s", "line_period_s", "focal_length_m", "altitude_m", "ground_speed_m_s",
+                   "platform_x_at_t0_m", "platform_y_m", "dem_dx_m", "dem_dy_m")
+_REQUIRED_VARS = ("time", "detector", "detector_band", "detector_along_m", "detector_across_m",
+                  "detector_pixels", "detector_pitch_m", "knowledge_time", "knowledge_roll", "knowledge_pitch",
+                  "knowledge_yaw", "dem", "dem_x", "dem_y")
+
+
+def _increasing(x: np.ndarray) -> bool:
+    return x.size < 2 or bool(np.all(np.diff(x) > 0))
+
+
+def check_product(ds, path) -> None:
+    """Cheap structural checks of a product dataset (no image is decompressed).
+
+    Raises
+    ------
+    ProductError
+        Naming the file and the variable or attribute at fault and what is expected.
+    """
+    for name in _REQUIRED_VARS:
+        if name not in ds.variables:
+            raise ProductError(f"{path}: malformed product, no variable {name!r}")
+    for name in _REQUIRED_ATTRS:
+        if name not in ds.attrs:
+            raise ProductError(f"{path}: malformed product, no global attribute {name!r}")
+        try:
+            v = float(ds.attrs[name])
+        except (TypeError, ValueError):
+            raise ProductError(f"{path}: attribute {name!r} must be a number, got {ds.attrs[name]!r}") from None
+        if not np.isfinite(v):
+            raise ProductError(f"{path}: attribute {name!r} must be finite, got {v}")
+    for name in ("line_period_s", "focal_length_m", "altitude_m", "ground_speed_m_s", "dem_dx_m", "dem_dy_m"):
+        if not float(ds.attrs[name]) > 0:
+            raise ProductError(f"{path}: attribute {name!r} must be > 0, got {ds.attrs[name]}")
+    t = np.asarray(ds["time"].values, dtype=np.float64)
+    if t.ndim != 1 or t.size < 2:
+        raise ProductError(f"{path}: variable 'time' must hold one time per line (at least 2), got shape {t.shape}")
+    if not np.isfinite(t).all():
+        raise ProductError(f"{path}: variable 'time' has {int((~np.isfinite(t)).sum())} non-finite line times "
+                           f"(first at line {int(np.flatnonzero(~np.isfinite(t))[0])})")
+    if not _increasing(t):
+        raise ProductError(f"{path}: variable 'time' must increase strictly from line to line "
+                           f"(first fault at line {int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1})")
+    for name in ("knowledge_time", "knowledge_roll", "knowledge_pitch", "knowledge_yaw", "dem",
+                 "detector_along_m", "detector_across_m", "detector_pitch_m"):
+        v = np.asarray(ds[name].values, dtype=np.float64)
+        if v.size == 0 or not np.isfinite(v).all():
+            raise ProductError(f"{path}: variable {name!r} must hold finite values "
+                               f"({int((~np.isfinite(v)).sum())} of {v.size} are not)")
+    if not _increasing(np.asarray(ds["knowledge_time"].values, dtype=np.float64)):
+        raise ProductError(f"{path}: variable 'knowledge_time' must increase strictly")
+    names = [str(x) for x in np.atleast_1d(ds["detector"].values)]
+    pixels = np.atleast_1d(ds["detector_pixels"].values)
+    for i, name in enumerate(names):
+        key = f"image_{name}"
+        if key not in ds.variables:
+            raise ProductError(f"{path}: no variable {key!r} for detector {name!r}")
+        shape = tuple(int(n) for n in ds[key].shape)
+        if len(shape) != 2 or shape[0] != t.size or shape[1] != int(pixels[i]):
+            raise ProductError(f"{path}: variable {key!r} has shape {shape}; expected ({t.size} lines, "
+                               f"{int(pixels[i])} columns) from 'time' and 'detector_pixels'")
 
 
 def clamped_attitude(series):
@@ -190,6 +275,7 @@ def read_product(run_dir: str | Path) -> Product:
     if not p.exists():
         raise ProductError(f"{p}: product file not found (run `simsat render SCENARIO --out DIR` first)")
     ds = _open(p)
+    check_product(ds, p)
     try:
         a = ds.attrs
         dets = []

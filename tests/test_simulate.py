@@ -19,7 +19,8 @@ def tiny_run(tmp_path_factory):
 
 
 def test_run_directory_holds_product_truth_and_run_json(tiny_run):
-    assert sorted(p.name for p in tiny_run.iterdir()) == ["product.nc", "run.json", "truth.nc"]
+    assert sorted(p.name for p in tiny_run.iterdir() if not p.name.startswith(".")) == ["product.nc", "run.json", "truth.nc"]
+    assert not any(p.name.endswith(".part") for p in tiny_run.iterdir())
     ds = xr.load_dataset(tiny_run / "product.nc")
     for b in ("B0", "B1", "B2", "B3"):
         assert ds[f"image_{b}"].dims == ("line", "column")
