@@ -105,7 +105,7 @@ def _nan_runs(x) -> list:
 
 def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | None = None,
                      overrides: dict | None = None, tag: str = "") -> dict:
-    """Render, restore, and score against truth with the accuracy metric of DESIGN.md."""
+    """Render, restore, and score against truth with the accuracy metric of docs/design.md."""
     from restore.pipeline import restore_run
     from simsat.product import read_truth
     from simsat.scenario import load_scenario

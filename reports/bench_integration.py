@@ -1,6 +1,6 @@
 """Differential-level benchmark of the integration methods on the CNES / Pleiades case.
 
-The case (CNES paper §3.2.3 and §4; DESIGN.md "headline numbers"):
+The case (CNES paper §3.2.3 and §4; docs/design.md "reference numbers"):
 
 * jitter: the ``cmg`` model of :mod:`simsat.attitude` — 4 exciters, harmonics
   ``[1, 2]`` (8 lines), main lines in 50–80 Hz, main-line amplitude
@@ -14,7 +14,7 @@ The case (CNES paper §3.2.3 and §4; DESIGN.md "headline numbers"):
   (white, independent between pairs);
 * optional gaps: NaN blocks (clouds: the same lines missing in every pair).
 
-Metric (DESIGN.md): ``error = estimate - truth`` over the estimated samples,
+Metric (docs/design.md): ``error = estimate - truth`` over the estimated samples,
 mean removed; RMS and 99.7th percentile of ``|error|`` in px and µrad, coverage
 (fraction of samples estimated) and run time.  CNES reports 0.013 px RMS and
 0.04 px at 99.7 %.

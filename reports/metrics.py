@@ -1,4 +1,4 @@
-"""The accuracy metric of DESIGN.md.
+"""The accuracy metric of docs/design.md.
 
 error(t) = estimated θ(t) − true θ(t) per axis, over the lines where an
 estimate exists, with its mean removed (the constant is unobservable from

@@ -12,7 +12,7 @@ Conventions
   of the reference band (``pixel_ifov_rad``).
 * ``δ(t) = true(t) − knowledge(t)`` is the part of the attitude the images have to
   restore; the restoration's *correction* is ``restored − knowledge``.
-* Errors follow DESIGN.md: estimate − truth over the lines where an estimate
+* Errors follow docs/design.md: estimate − truth over the lines where an estimate
   exists, mean removed, RMS and 99.7th percentile of |error|
   (:func:`reports.metrics.error_stats`).
 * A pair's differential at line ``l`` is ``δ(t_l + τ) − δ(t_l)`` (restoration's

@@ -220,7 +220,7 @@ def _summary_section(pg: _Page, run: D.RunData, sc: dict, hd: dict, report_notes
         pg.table(["axis", "restored RMS [px]", "restored 99.7 % [px]", "RMS [µrad]", "99.7 % [µrad]",
                   "AOCS RMS [px]", "AOCS 99.7 % [px]", "AOCS RMS [µrad]", "AOCS 99.7 % [µrad]",
                   "improvement (RMS)", "coverage"], rows)
-        pg.para("Error = estimate − truth over the estimated lines, mean removed (DESIGN.md); AOCS = the uncorrected "
+        pg.para("Error = estimate − truth over the estimated lines, mean removed (the metric of docs/design.md); AOCS = the uncorrected "
                 "knowledge on the same lines; improvement = AOCS RMS / restored RMS.", "meta")
     elif have_truth:
         pg.table(["axis", "AOCS RMS [px]", "AOCS 99.7 % [px]", "AOCS RMS [µrad]", "AOCS 99.7 % [µrad]"], rows)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from typing import Any, Iterable, Sequence
 
-__all__ = ["ScenarioError", "Section", "REQUIRED"]
+__all__ = ["ScenarioError", "Section", "REQUIRED", "record_keys"]
 
 
 class ScenarioError(ValueError):
@@ -30,6 +30,23 @@ class _Required:
 
 
 REQUIRED: Any = _Required()
+
+#: when a list, every typed read of a key appends ``(dotted key, type, default, constraints)``
+#: (used to generate the scenario-key reference from the validators themselves)
+_RECORDER: list | None = None
+
+
+def record_keys(on: bool = True) -> list | None:
+    """Start (or stop) recording the keys the validators read; returns the record."""
+    global _RECORDER
+    _RECORDER = [] if on else None
+    return _RECORDER
+
+
+def _record(sec: "Section", name: str, kind: str, default: Any, **constraints) -> None:
+    if _RECORDER is not None:
+        c = {k: v for k, v in constraints.items() if v is not None and v != ()}
+        _RECORDER.append((sec.key(name), kind, None if default is REQUIRED else default, default is REQUIRED, c))
 
 
 def _type_name(value: Any) -> str:
@@ -92,6 +109,7 @@ class Section:
     def number(self, name: str, default: Any = REQUIRED, *, gt: float | None = None,
                ge: float | None = None, lt: float | None = None, le: float | None = None) -> float:
         """A real number (integers accepted), with optional bounds."""
+        _record(self, name, "number", default, gt=gt, ge=ge, lt=lt, le=le)
         value = self._raw(name, default)
         if value is default and name not in self.data:
             return value
@@ -106,6 +124,7 @@ class Section:
     def integer(self, name: str, default: Any = REQUIRED, *, gt: int | None = None,
                 ge: int | None = None, lt: int | None = None, le: int | None = None) -> int:
         """An integer, with optional bounds."""
+        _record(self, name, "integer", default, gt=gt, ge=ge, lt=lt, le=le)
         value = self._raw(name, default)
         if value is default and name not in self.data:
             return value
@@ -118,6 +137,7 @@ class Section:
         return int(value)
 
     def boolean(self, name: str, default: Any = REQUIRED) -> bool:
+        _record(self, name, "boolean", default)
         value = self._raw(name, default)
         if value is default and name not in self.data:
             return value
@@ -126,6 +146,7 @@ class Section:
         return value
 
     def string(self, name: str, default: Any = REQUIRED, *, choices: Sequence[str] | None = None) -> str:
+        _record(self, name, "string", default, choices=tuple(choices) if choices else None)
         value = self._raw(name, default)
         if value is default and name not in self.data:
             return value
@@ -138,6 +159,7 @@ class Section:
     def numbers(self, name: str, default: Any = REQUIRED, *, length: int | None = None,
                 min_length: int = 0, gt: float | None = None, ge: float | None = None) -> list[float]:
         """An array of numbers."""
+        _record(self, name, "array of numbers", default, length=length, min_length=min_length or None, gt=gt, ge=ge)
         value = self._raw(name, default)
         if value is default and name not in self.data:
             return value
@@ -159,6 +181,7 @@ class Section:
 
     def strings(self, name: str, default: Any = REQUIRED, *, choices: Sequence[str] | None = None) -> list[str]:
         """A string or an array of strings."""
+        _record(self, name, "string or array of strings", default, choices=tuple(choices) if choices else None)
         value = self._raw(name, default)
         if value is default and name not in self.data:
             return value
@@ -198,6 +221,7 @@ class Section:
 
     def raw(self, name: str, default: Any = None) -> Any:
         """The untyped value (marks the key as known)."""
+        _record(self, name, "any", default)
         return self._raw(name, default)
 
     def finish(self, extra_allowed: Iterable[str] = ()) -> None:

@@ -16,7 +16,7 @@ Sampling of the integration:
 * optics: the Gaussian PSF (from the MTF at Nyquist) is applied as a ground
   prefilter of the texture.
 
-Precision (DESIGN.md, "Numerical pitfalls"): lines of sight, attitudes and
+Precision (docs/design.md, "Numerical pitfalls"): lines of sight, attitudes and
 platform positions are computed in float64 on the host in the local frame
 centred on the scene; each ray is started ``lift_m`` above the highest terrain
 along its float64 path before being handed to Mitsuba in float32.

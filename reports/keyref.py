@@ -1,0 +1,263 @@
+"""The scenario-key reference (``docs/scenario-keys.md``), generated from the validators.
+
+Every key is listed as the validators read it -- type, default, accepted range
+or choices -- by recording the reads of :class:`simsat.config.Section` while a
+scenario holding every table (and a jitter of every kind) is validated, so the
+reference cannot drift from the code. Meanings come from :data:`MEANING`; a
+test fails when a key has none.
+
+Run ``python -m reports.keyref > docs/scenario-keys.md`` after changing a key.
+"""
+from __future__ import annotations
+
+import copy
+import re
+
+__all__ = ["recorded_keys", "scenario_key_reference", "MEANING"]
+
+#: one-line meaning per key ("[]" stands for an index of an array of tables)
+MEANING = {
+    "scenario.name": "name of the scenario (default run directory `runs/<name>`)",
+    "scenario.seed": "seed of every random draw (same scenario and seed: same bytes)",
+    "scenario.description": "free text shown by `simsat scenarios` and in the report",
+    "scenario.requirement.max_rms_px": "requirement: worst restored axis RMS error [px of the reference band]",
+    "scenario.requirement.max_p997_px": "requirement: worst restored axis 99.7th percentile of the error magnitude [px]",
+    "platform.altitude_m": "platform altitude above the scene's datum [m]",
+    "platform.ground_speed_m_s": "speed of the sub-satellite point along track [m/s]",
+    "platform.off_nadir_roll_deg": "viewing tilt across track [deg]",
+    "platform.off_nadir_pitch_deg": "viewing tilt along track [deg]",
+    "instrument.focal_length_m": "focal length [m]",
+    "instrument.line_period_ms": "line period Te: one image line per Te [ms]",
+    "instrument.pixel_pitch_um": "default detector pixel pitch [µm]",
+    "instrument.pixels": "default detector length [pixels]",
+    "instrument.focal_plane_width_mm": "focal plane size across track: detectors must fit [mm]",
+    "instrument.focal_plane_height_mm": "focal plane size along track: detectors must fit [mm]",
+    "instrument.mtf_nyquist": "MTF at Nyquist (sets the optical PSF)",
+    "instrument.time_subsamples": "time samples per line period (smear of fast jitter)",
+    "instrument.spatial_subsamples": "rays per pixel side (pixel footprint integration)",
+    "instrument.noise.full_well_e": "full-well capacity [electrons]",
+    "instrument.noise.signal_fraction": "signal of a reflectance-1 scene as a fraction of the full well",
+    "instrument.noise.read_noise_e": "read noise, 1 σ [electrons]",
+    "instrument.noise.bits": "quantisation depth [bits]",
+    "instrument.noise.enabled": "add photon and read noise",
+    "instrument.detectors[].name": "detector (band) name, e.g. B0",
+    "instrument.detectors[].band": "spectral band of the texture it sees",
+    "instrument.detectors[].along_track_mm": "along-track position on the focal plane: sets the delays τ [mm]",
+    "instrument.detectors[].across_track_mm": "across-track offset of the detector's centre [mm]",
+    "instrument.detectors[].pixels": "this detector's length (default instrument.pixels)",
+    "instrument.detectors[].pixel_pitch_um": "this detector's pitch (default instrument.pixel_pitch_um) [µm]",
+    "acquisition.lines": "image lines per band",
+    "acquisition.block_lines": "lines rendered per block (memory and progress granularity)",
+    "acquisition.reference_detector": "band whose pixel is the unit of the error figures",
+    "acquisition.start_time_s": "time of the first line [s]",
+    "acquisition.scene_margin_m": "terrain margin around the footprint (jitter and relief) [m]",
+    "attitude.jitter[].kind": "disturbance model",
+    "attitude.jitter[].axis": "axis or axes it moves (independent draws per axis)",
+    "attitude.jitter[].frequency_hz": "frequency [Hz]",
+    "attitude.jitter[].amplitude_urad": "amplitude [µrad] (cmg: of the main lines)",
+    "attitude.jitter[].phase_deg": "phase at the acquisition start [deg]",
+    "attitude.jitter[].drift_percent": "frequency drift over the acquisition [%] (cmg: a [min, max] range)",
+    "attitude.jitter[].drift_shape": "time shape of the drift",
+    "attitude.jitter[].exciter_frequencies_hz": "fundamental frequency of each exciter (wheel, CMG) [Hz]",
+    "attitude.jitter[].harmonics": "harmonic orders of each exciter",
+    "attitude.jitter[].exciter_amplitude_ratios": "relative amplitude of each exciter",
+    "attitude.jitter[].harmonic_amplitude_ratios": "relative amplitude of each harmonic order",
+    "attitude.jitter[].frequency_noise_percent": "random frequency wander, 1 σ [%]",
+    "attitude.jitter[].amplitude_noise_percent": "random amplitude wander, 1 σ [%]",
+    "attitude.jitter[].noise_bandwidth_hz": "bandwidth of the frequency and amplitude wander [Hz]",
+    "attitude.jitter[].chirp_hz_per_s": "frequency rate of the chirp [Hz/s]",
+    "attitude.jitter[].damping_time_s": "exponential damping time [s]",
+    "attitude.jitter[].start_time_s": "start of the chirp after the acquisition start [s]",
+    "attitude.jitter[].f_min_hz": "lowest frequency of the spectrum [Hz]",
+    "attitude.jitter[].f_max_hz": "highest frequency of the spectrum [Hz]",
+    "attitude.jitter[].rms_urad": "RMS of the coloured jitter [µrad]",
+    "attitude.jitter[].corner_hz": "corner frequency of the spectrum [Hz]",
+    "attitude.jitter[].slope": "spectral slope above the corner (PSD ∝ f^-slope)",
+    "attitude.jitter[].n_components": "sinusoids summed to realise the spectrum",
+    "attitude.jitter[].coefficients_urad": "polynomial coefficients in time from the start [µrad, µrad/s, ...]",
+    "attitude.knowledge.cutoff_hz": "AOCS knowledge bandwidth: it knows the attitude below this [Hz]",
+    "attitude.knowledge.rate_hz": "AOCS knowledge sampling rate [Hz]",
+    "attitude.knowledge.noise_urad": "AOCS knowledge noise, 1 σ [µrad]",
+    "attitude.star_tracker.enabled": "provide sparse absolute star-tracker samples",
+    "attitude.star_tracker.rate_hz": "star-tracker sampling rate [Hz]",
+    "attitude.star_tracker.noise_urad": "star-tracker noise, 1 σ [µrad]",
+    "scene.dem.kind": "terrain source",
+    "scene.dem.resolution_m": "DEM grid spacing [m] (fractal: generated at it; files: resampled to it)",
+    "scene.dem.relief_m": "peak-to-peak height of the fractal terrain [m]",
+    "scene.dem.roughness": "Hurst-like exponent of the fractal terrain (small: rugged)",
+    "scene.dem.path": "GeoTIFF DEM file, relative to the scenario's folder",
+    "scene.dem.nodata": "no-data value of the GeoTIFF (default: the file's)",
+    "scene.dem_knowledge.noise_m": "height error of the DEM the ground segment knows, 1 σ [m]",
+    "scene.dem_knowledge.bias_m": "height bias of the known DEM [m]",
+    "scene.dem_knowledge.correlation_m": "correlation length of the known DEM's error [m]",
+    "scene.sun.elevation_deg": "sun elevation [deg]",
+    "scene.sun.azimuth_deg": "sun azimuth from +x (along track) toward +y [deg]",
+    "scene.sun.ambient": "diffuse sky light as a fraction of the irradiance",
+    "scene.sun.cast_shadows": "terrain casts shadows",
+    "scene.texture.kind": "ground reflectance source",
+    "scene.texture.texel_m": "texture sample size on the ground [m]",
+    "scene.texture.bands": "bands to synthesise (default: the instrument's)",
+    "scene.texture.water_fraction": "fraction of the area covered by water (no texture)",
+    "scene.texture.cloud_fraction": "fraction of the area covered by clouds",
+    "scene.texture.urban_fraction": "fraction of built-up area",
+    "scene.texture.forest_fraction": "fraction of forest",
+    "scene.texture.field_size_m": "typical field size [m]",
+    "scene.texture.cloud_height_m": "height of the cloud tops [m]",
+    "restoration.pairs": "band pairs `[\"AHEAD/BEHIND\", ...]`, or \"auto\" (every pair of visible bands)",
+    "restoration.selection": "candidate points: grid, double_gradient or spread",
+    "restoration.points_per_line": "candidates per line and pair",
+    "restoration.texture_max_std_px": "a-priori criterion: skip windows whose expected matching σ exceeds this [px]",
+    "restoration.window_lines": "matching window height [lines] (PHR: 3)",
+    "restoration.window_columns": "matching window width [columns] (PHR: 31)",
+    "restoration.search_lines": "integer search half-range around the prediction, lines [px]",
+    "restoration.search_columns": "integer search half-range around the prediction, columns [px]",
+    "restoration.pilot_search_lines": "wide search of the pilot pass, lines [px] (0: off)",
+    "restoration.pilot_search_columns": "wide search of the pilot pass, columns [px] (0: off)",
+    "restoration.match_method": "sub-pixel matcher: ncc (Gauss-Newton NCC) or phase",
+    "restoration.min_quality": "correlation below which a match is rejected",
+    "restoration.axes": "axes fitted by the instant synthesis",
+    "restoration.n_sigma": "outlier rejection threshold [σ]",
+    "restoration.min_points_per_line": "fewest points that make a line's differential",
+    "restoration.highpass_hz": "frequencies the AOCS already knows, removed from the estimate [Hz]",
+    "restoration.max_gap_fill_lines": "longest run of lines filled from neighbours; longer gaps are NaN",
+    "restoration.compensate_window": "undo the matching window's moving average on the differentials",
+    "restoration.method": "integration method (default wiener); options in [restoration.integration]",
+    "restoration.integration": "options of the integration method (table below)",
+    "restoration.iterations": "passes with re-prediction from the refined attitude",
+    "restoration.pair_order": "fused (all pairs at once) or best_first (patent claims 9-11)",
+    "restoration.anchor_star_tracker": "absolute constant from star-tracker samples when present",
+    "restoration.correct_images": "write corrected.nc and measure misregistration before/after",
+    "restoration.correction_column_step": "resampling grid exact every N columns, linear in between",
+    "restoration.min_coverage": "least fraction of lines restored for the run to succeed",
+}
+
+_JITTER = {
+    "harmonic": {"frequency_hz": 10.0, "amplitude_urad": 1.0},
+    "cmg": {"exciter_frequencies_hz": [50.0], "amplitude_urad": 1.0},
+    "damped_chirp": {"frequency_hz": 10.0, "amplitude_urad": 1.0, "damping_time_s": 1.0},
+    "psd": {"rms_urad": 1.0, "corner_hz": 10.0},
+    "polynomial": {"coefficients_urad": [1.0]},
+}
+
+
+def _norm(key: str) -> str:
+    return re.sub(r"\[\d+\]", "[]", key)
+
+
+def _record(raw: dict) -> list:
+    from restore.pipeline import restoration_settings
+    from simsat import config
+    from simsat.scenario import load_scenario
+
+    rec = config.record_keys(True)
+    try:
+        sc = load_scenario(raw)
+        restoration_settings(sc.section("restoration"))
+    finally:
+        config.record_keys(False)
+    return rec
+
+
+def recorded_keys() -> dict:
+    """``{table: [(key, type, default, required, constraints)]}``, jitter keys per kind."""
+    from simsat.scenario import _read_toml, builtin_scenarios
+
+    base = _read_toml(builtin_scenarios()["phr_cmg"])
+    base["attitude"]["star_tracker"] = {"enabled": True}
+    out: dict = {}
+    seen: set = set()
+
+    def add(table, entry):
+        if (table, entry[0]) in seen:
+            return
+        seen.add((table, entry[0]))
+        out.setdefault(table, []).append(entry)
+
+    raw = copy.deepcopy(base)
+    raw["attitude"]["jitter"] = [{"kind": "harmonic", "axis": "roll", **_JITTER["harmonic"]}]
+    for key, kind, default, req, cons in _record(raw):
+        k = _norm(key)
+        if k.startswith("attitude.jitter[]"):
+            continue
+        table = k.rsplit(".", 1)[0]
+        add(table, (k, kind, default, req, cons))
+    for jk, keys in _JITTER.items():
+        raw = copy.deepcopy(base)
+        raw["attitude"]["jitter"] = [{"kind": jk, "axis": "roll", **keys}]
+        for key, kind, default, req, cons in _record(raw):
+            k = _norm(key)
+            if k.startswith("attitude.jitter[]"):
+                add(f"attitude.jitter[] (kind = \"{jk}\")", (k, kind, default, req, cons))
+    return out
+
+
+def _fmt_default(default, required) -> str:
+    if required:
+        return "**required**"
+    if default is None:
+        return "—"
+    if isinstance(default, bool):
+        return "true" if default else "false"
+    if isinstance(default, str):
+        return f'"{default}"'
+    return f"{default!r}" if not isinstance(default, (list, tuple)) else str(list(default))
+
+
+def _fmt_range(cons: dict) -> str:
+    parts = []
+    if "choices" in cons:
+        parts.append(" \\| ".join(f'"{c}"' for c in cons["choices"]))
+    lo = (">", cons["gt"]) if "gt" in cons else ((">=", cons["ge"]) if "ge" in cons else None)
+    hi = ("<", cons["lt"]) if "lt" in cons else (("<=", cons["le"]) if "le" in cons else None)
+    if lo:
+        parts.append(f"{lo[0]} {lo[1]:g}")
+    if hi:
+        parts.append(f"{hi[0]} {hi[1]:g}")
+    if "length" in cons:
+        parts.append(f"{cons['length']} values")
+    if "min_length" in cons:
+        parts.append(f">= {cons['min_length']} values")
+    return ", ".join(parts) or "—"
+
+
+def scenario_key_reference() -> str:
+    """The Markdown reference of every scenario key."""
+    from restore.integration import METHODS, method_options
+
+    lines = ["# Scenario keys", "",
+             "Every key a scenario may hold, as the validators read it (generated by "
+             "`python -m reports.keyref`; a test checks that this file is up to date). Units are in the "
+             "key names (`_m`, `_ms`, `_urad`, `_deg`, `_hz`, `_px`, `_percent`). `simsat validate FILE` "
+             "checks a scenario against these rules; an unknown key is an error. On the command line, "
+             "`--set TABLE.KEY=VALUE` overrides a key (`--set attitude.jitter[0].amplitude_urad=3`).", "",
+             "Besides the ranges below, `simsat validate` refuses designs whose resources would exhaust "
+             "the machine (strip length, swath, rays, product size, DEM samples, texture sampling, jitter "
+             "components), naming the key that drives them.", ""]
+    tables = recorded_keys()
+    for table, entries in tables.items():
+        lines += [f"## `[{table}]`", "", "| key | type | default | accepted | meaning |", "|---|---|---|---|---|"]
+        for k, kind, default, req, cons in entries:
+            name = k.rsplit(".", 1)[-1]
+            meaning = MEANING.get(k, "")
+            lines.append(f"| `{name}` | {kind} | {_fmt_default(default, req)} | {_fmt_range(cons)} | {meaning} |")
+        lines.append("")
+    lines += ["## `[scene.dem]` and `[scene.texture]` from files", "",
+              "`[scene.dem] kind = \"geotiff\"` reads `path` (a GeoTIFF, relative to the scenario's folder) "
+              "and `nodata`; it is re-centred on the scene and resampled to `resolution_m` when given. "
+              "`[scene.texture] kind = \"orthoimage\"` reads `path`, `channels` (band → channel index table, "
+              "required), `x0_m`, `y0_m` (lower-left corner, default centred) and `scale` (DN → reflectance); "
+              "`texel_m` is then its pixel size.", ""]
+    lines += ["## `[restoration.integration]`", "",
+              "Options of the method named by `restoration.method` (checked against it at `simsat validate`; "
+              "each is the keyword of the method's function in `restore.integration`).", "",
+              "| method | options (default) |", "|---|---|"]
+    for m in sorted(METHODS):
+        opts = method_options(m)
+        lines.append(f"| `{m}` | " + ", ".join(f"`{k}` ({_fmt_default(v, False)})" for k, v in opts.items()) + " |")
+    lines += ["", "## `[report]`", "", "No key yet: the report reads nothing from this table, so any key in it "
+              "is refused.", ""]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    print(scenario_key_reference(), end="")
