@@ -13,6 +13,9 @@ import numpy as np
 
 from simsat.product import atomic_write_json
 
+#: where the benches write their scratch runs (rendered products they restore and score)
+SCRATCH_DIR = Path("bench") / "scratch"
+
 __all__ = ["run_bench", "format_result", "bench_render", "bench_restore"]
 
 
@@ -117,14 +120,18 @@ def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | 
     if lines:
         over["acquisition"] = {"lines": lines}
     sc = load_scenario(scenario, overrides=over or None)
-    rd = Path(run_dir) if run_dir else Path("runs") / (f"bench_{sc.name}" + (f"_{lines}" if lines else "") +
-                                                        (f"_{tag}" if tag else ""))
+    rd = Path(run_dir) if run_dir else SCRATCH_DIR / (f"bench_{sc.name}" + (f"_{lines}" if lines else "") +
+                                                       (f"_{tag}" if tag else ""))
+    print(f"bench: render {sc.name} ({sc.acquisition.lines} lines{', ' + tag if tag else ''}) into {rd} ...",
+          file=sys.stderr, flush=True)
     t0 = _time.perf_counter()
     simulate(sc, rd, progress=False)
     t_render = _time.perf_counter() - t0
+    print(f"bench:   rendered in {t_render:.1f} s; restoring ...", file=sys.stderr, flush=True)
     t1 = _time.perf_counter()
     res = restore_run(rd, progress=False)
     t_restore = _time.perf_counter() - t1
+    print(f"bench:   restored in {t_restore:.1f} s", file=sys.stderr, flush=True)
     import xarray as xr
     truth = read_truth(rd)
     rest = xr.load_dataset(rd / "restoration.nc")

@@ -47,6 +47,7 @@ dimensionless (rad of θ per rad of Δθ for H_k, rad of θ̂ per rad of θ for 
 
 from __future__ import annotations
 
+import sys
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -1068,7 +1069,7 @@ def method_unavailable(method: str, integrate: Callable | None = None, **options
     return None
 
 
-def make_patent_figures(out_dir, *, monte_carlo: bool = True, seed: int = 0) -> list[Path]:
+def make_patent_figures(out_dir, *, monte_carlo: bool = True, seed: int = 0, progress: bool = False) -> list[Path]:
     """Write figs. 7–14 as ``figNN_<name>.png`` and ``.csv`` in ``out_dir``.
 
     Parameters
@@ -1082,6 +1083,8 @@ def make_patent_figures(out_dir, *, monte_carlo: bool = True, seed: int = 0) -> 
         them, with a note saying why.
     seed : int
         Seed of every Monte Carlo draw.
+    progress : bool
+        Say each figure on stderr as it starts (the Monte Carlo takes tens of seconds).
 
     Returns
     -------
@@ -1100,18 +1103,23 @@ def make_patent_figures(out_dir, *, monte_carlo: bool = True, seed: int = 0) -> 
     cache: dict = {}
     kk = dict(monte_carlo=monte_carlo and why_k is None, seed=seed)
     kp = dict(monte_carlo=monte_carlo and why_poly is None, seed=seed)
-    datas = [
-        (fig07_data(mc_cache=cache, **kk), draw_fig07, why_k),
-        (fig08_data(mc_cache=cache, **kk), draw_fig08, why_k),
-        (fig09_data(mc_cache=cache, **kk), draw_fig09, why_k),
-        (fig10_data(mc_cache=cache, **kk), draw_fig10, why_k),
-        (fig11_data(mc_cache=cache, **kk), draw_fig11, why_k),
-        (fig12_data(mc_cache=cache, **kk), draw_fig12, why_k),
-        (fig13_data(**kk), draw_fig13, why_k),
-        (fig14_data(**kp), draw_fig14, why_poly),
+    makers = [
+        (lambda: fig07_data(mc_cache=cache, **kk), draw_fig07, why_k),
+        (lambda: fig08_data(mc_cache=cache, **kk), draw_fig08, why_k),
+        (lambda: fig09_data(mc_cache=cache, **kk), draw_fig09, why_k),
+        (lambda: fig10_data(mc_cache=cache, **kk), draw_fig10, why_k),
+        (lambda: fig11_data(mc_cache=cache, **kk), draw_fig11, why_k),
+        (lambda: fig12_data(mc_cache=cache, **kk), draw_fig12, why_k),
+        (lambda: fig13_data(**kk), draw_fig13, why_k),
+        (lambda: fig14_data(**kp), draw_fig14, why_poly),
     ]
     written: list[Path] = []
-    for data, draw, why in datas:
+    t0 = time.perf_counter()
+    for i, (make, draw, why) in enumerate(makers):
+        if progress:
+            print(f"figures: fig. {7 + i} ({i + 1}/{len(makers)}, {time.perf_counter() - t0:.0f} s)",
+                  file=sys.stderr, flush=True)
+        data = make()
         if why:
             data.meta["mc_unavailable"] = why
         _note_mc_unavailable(data)

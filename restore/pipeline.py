@@ -669,7 +669,9 @@ def restoration_dataset(res: RestorationResult):
         inl.append(p.inlier if p.inlier is not None else np.zeros(p.valid.size, bool))
     data["match_pair"] = ("match", np.concatenate(mp) if mp else np.zeros(0, np.int16))
     for k, v in cols.items():
-        data[f"match_{k}"] = ("match", np.concatenate(v) if v else np.zeros(0), {"units": "px"})
+        attrs = ({"units": "1", "long_name": "normalised correlation of the match"} if k == "quality"
+                 else {"units": "px"})
+        data[f"match_{k}"] = ("match", np.concatenate(v) if v else np.zeros(0), attrs)
     data["match_valid"] = ("match", np.concatenate(valid).astype(np.int8))
     data["match_inlier"] = ("match", np.concatenate(inl).astype(np.int8))
     data["match_residual_line"] = ("match", data["match_meas_line_b"][1] - data["match_pred_line_b"][1], {"units": "px"})

@@ -128,7 +128,7 @@ def _report(run_dir: Path, out_dir, *, quiet: bool) -> Path:
     check_consistency(run_dir)
     with RunLock(run_dir, "report"):
         t0 = time.time_ns()
-        path = make_run_report(run_dir, out_dir=out_dir)
+        path = make_run_report(run_dir, out_dir=out_dir, progress=not quiet)
         _write_report_manifest(Path(path).parent, since_ns=t0, run_dir=run_dir)
         return path
 
@@ -191,7 +191,8 @@ def cmd_run(args) -> int:
 def cmd_figures(args) -> int:
     from reports.figures import make_patent_figures
 
-    paths = make_patent_figures(Path(args.out), monte_carlo=not args.no_monte_carlo, seed=args.seed)
+    paths = make_patent_figures(Path(args.out), monte_carlo=not args.no_monte_carlo, seed=args.seed,
+                                progress=not args.quiet)
     for p in paths:
         print(p)
     return 0
