@@ -207,6 +207,8 @@ def _summary_section(pg: _Page, run: D.RunData, sc: dict, hd: dict, report_notes
     have_truth = run.truth is not None
     for a in D.AXES:
         d = hd["axes"][a]
+        if a == "yaw":  # yaw does not move the image by its line-of-sight angle: show it in µrad only
+            d = {k: (float("nan") if k.endswith("_px") else v) for k, v in d.items()}
         tag = "" if d.get("restored", True) or run.restoration is None else " (not restored)"
         if have_truth and run.restoration is not None:
             rows.append([f"{a}{tag}", _fmt(d.get("rms_px")), _fmt(d.get("p997_px")), _fmt(d.get("rms_urad")),
@@ -230,6 +232,14 @@ def _summary_section(pg: _Page, run: D.RunData, sc: dict, hd: dict, report_notes
     elif rows:
         pg.table(["axis", "correction RMS [px]", "correction RMS [µrad]", "coverage"], rows)
         pg.para("No truth: accuracy cannot be measured; the table gives the size of the applied correction.", "meta")
+    if rows:
+        ref = run.product.reference_detector
+        det = next((x for x in run.product.instrument.detectors if x.name == ref), run.product.instrument.detectors[0])
+        half = det.pixels / 2.0
+        pg.para(f"Yaw is given in µrad only (its px columns are empty): it rotates the image about the line of "
+                f"sight, moving a point along track by (its column offset from the field centre) × yaw; at the "
+                f"field edge ({half:.0f} px from the centre of {det.name}) 1 µrad of yaw moves the image by "
+                f"{half * 1e-6:.2g} px.", "meta")
     for n in run.notes + report_notes:
         pg.note(_e(n))
     pg.html("</div>")
