@@ -340,17 +340,32 @@ def draw_scene_mpl(ax, scene: dict, *, note: str = ""):
     ax.plot_surface(X, Y, scene["z"] * ex / 1e3, cmap="terrain", linewidth=0, antialiased=False, alpha=0.85,
                     rcount=80, ccount=80)
     lift = 0.01 * max(np.ptp(scene["z"]) * ex, 1.0) / 1e3
+    styles = ("-", "--", "-.", ":")
+    n = len(scene["footprints"])
     for j, (band, g) in enumerate(scene["footprints"].items()):
         ok = np.all(np.isfinite(g), axis=1)
-        ax.plot(g[ok, 0] / 1e3, g[ok, 1] / 1e3, g[ok, 2] * ex / 1e3 + lift, color=pair_color(j), lw=2.0,
-                label=f"footprint {band}")
+        # the bands see nearly the same strip: widest line first, dashed thinner ones on top, so all show
+        ax.plot(g[ok, 0] / 1e3, g[ok, 1] / 1e3, g[ok, 2] * ex / 1e3 + lift * (1 + j), color=pair_color(j),
+                lw=1.2 + 1.6 * (n - 1 - j), ls=styles[j % len(styles)], label=f"footprint {band}")
     ax.set_xlabel("x along-track [km]")
     ax.set_ylabel("y across-track [km]")
     ax.set_zlabel(f"z [km] (×{ex:.1f})")
-    ax.set_title(("DEM and band footprints" + (f" — {note}" if note else "")), fontsize=10)
+    sep = footprint_separation_m(scene["footprints"])
+    sep_txt = f"; footprints coincide within {sep:.0f} m" if np.isfinite(sep) else ""
+    ax.set_title(("DEM and band footprints" + sep_txt + (f" — {note}" if note else "")), fontsize=10)
     ax.legend(loc="upper left", fontsize=8)
     ax.view_init(elev=35, azim=-60)
     return ax.figure
+
+
+def footprint_separation_m(footprints: dict) -> float:
+    """Largest horizontal distance between corresponding points of the bands' footprints [m]."""
+    gs = [np.asarray(g, float) for g in footprints.values()]
+    if len(gs) < 2 or any(g.shape != gs[0].shape for g in gs):
+        return float("nan")
+    d = [np.hypot(g[:, 0] - gs[0][:, 0], g[:, 1] - gs[0][:, 1]) for g in gs[1:]]
+    d = np.concatenate(d)
+    return float(np.nanmax(d)) if np.isfinite(d).any() else float("nan")
 
 
 def render_scene_pyvista(scene: dict, png_path, *, window_size=(1000, 680)) -> str:
@@ -386,14 +401,18 @@ def render_scene_pyvista(scene: dict, png_path, *, window_size=(1000, 680)) -> s
         pts = g.copy()
         pts[:, 2] = pts[:, 2] * ex + lift * (1 + j)
         col = pair_color(j)
-        pl.add_mesh(pv.lines_from_points(pts), color=col, line_width=3)
+        # nearly coincident strips: widest line first, thinner ones on top, so every band shows
+        pl.add_mesh(pv.lines_from_points(pts), color=col, line_width=3 + 3 * (len(scene["footprints"]) - 1 - j))
         texts.append((band, col))
     for j, (band, col) in enumerate(texts):
         pl.add_text(f"footprint {band}", position=(12, window_size[1] - 60 - 22 * j), font_size=11, color=col)
+    sep = footprint_separation_m(scene["footprints"])
+    sep_txt = (f"; the band footprints coincide within {sep:.0f} m (widest line drawn first)"
+               if np.isfinite(sep) else "")
     pl.add_text(f"DEM and band ground footprints (vertical x{ex:.1f})", position="upper_edge", font_size=12,
                 color="black")
     pl.add_text(f"x along-track: {np.ptp(x) / 1e3:.1f} km, y across-track: {np.ptp(y) / 1e3:.1f} km, "
-                f"relief {np.ptp(Z):.0f} m", position="lower_left", font_size=9, color="black")
+                f"relief {np.ptp(Z):.0f} m{sep_txt}", position="lower_left", font_size=9, color="black")
     # look from the south-west, above, along-track axis running left to right
     c = np.array([x.mean(), y.mean(), float(np.mean(Z)) * ex])
     d = 1.25 * span
