@@ -149,24 +149,6 @@ def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> Simulati
     renderer = make_renderer(sc, model, dem, texture, irr)
     timings["scene_build_s"] = _time.perf_counter() - t
 
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=lines, unit="line", desc=f"render {sc.name}", file=sys.stderr, dynamic_ncols=True)
-    t = _time.perf_counter()
-    try:
-        radiance = renderer.render(t_lines, block_lines=sc.acquisition.block_lines,
-                                   progress=(bar.update if bar is not None else None))
-    finally:
-        if bar is not None:
-            bar.close()
-    timings["render_s"] = _time.perf_counter() - t
-
-    t = _time.perf_counter()
-    images = {name: apply_radiometry(img, inst.radiometry, seed=sc.seed, band_index=i)
-              for i, (name, img) in enumerate(radiance.items())}
-    timings["radiometry_s"] = _time.perf_counter() - t
-
     # knowledge and star tracker
     kn = model.knowledge_series()
     st = model.star_tracker_series()
@@ -177,7 +159,7 @@ def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> Simulati
     t_truth = np.arange(t_lines[0] - inst.line_period_s, t_lines[-1] + inst.line_period_s + 1e-12, dt_truth)
     tr, tp, ty = model.evaluate(t_truth)
 
-    ds = _product_dataset(sc, images, t_lines, kn, st, known_dem)
+    ds = _product_dataset(sc, None, t_lines, kn, st, known_dem)
     truth = xr.Dataset(
         {"roll": ("time", tr, {"units": "rad", "long_name": "true line-of-sight roll"}),
          "pitch": ("time", tp, {"units": "rad", "long_name": "true line-of-sight pitch"}),
@@ -197,9 +179,12 @@ def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> Simulati
     tmp = make_tmp_dir(out_dir / "render")
     try:
         t = _time.perf_counter()
-        atomic_write_dataset(ds, tmp / "product.nc")
         atomic_write_dataset(truth, tmp / "truth.nc")
+        # the product: everything but the images, then the images block after block (memory bounded by
+        # one block of lines, whatever the image length); tmp is moved into place only when complete
+        ds.to_netcdf(tmp / "product.nc", engine="netcdf4", encoding=_encoding(ds))
         timings["write_s"] = _time.perf_counter() - t
+        _render_images_into(sc, renderer, tmp / "product.nc", t_lines, timings, progress=progress)
         timings["total_s"] = _time.perf_counter() - t_all
         rs = renderer.stats
         render_stats = {"variant": rs.variant, "rays": rs.rays, "wall_s": rs.wall_s, "rays_per_s": rs.rays_per_s,
@@ -217,7 +202,66 @@ def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> Simulati
     return SimulationResult(out_dir=out_dir, timings=timings, render_stats=render_stats, replaced=replaced)
 
 
-def _product_dataset(sc: Scenario, images: dict, t_lines, kn, st, known_dem):
+def _encoding(ds) -> dict:
+    from .product import NETCDF_ENCODING
+
+    return {k: dict(NETCDF_ENCODING) for k, v in ds.data_vars.items() if v.dtype.kind in "fiu" and v.ndim >= 1}
+
+
+def _render_images_into(sc: Scenario, renderer, path: Path, t_lines, timings: dict, *, progress: bool) -> None:
+    """Render the acquisition block by block, apply the radiometry, append each block to ``path``.
+
+    The image variables (uint16 DN, compressed, chunked by block) are created
+    in the product file written without them; noise draws are seeded per line,
+    so the noise does not depend on the block size (the renderer's float32
+    arithmetic may differ by 1 DN on rare pixels between block sizes).
+    """
+    import netCDF4
+
+    inst = sc.instrument
+    dets = inst.detectors
+    block = sc.acquisition.block_lines
+    lines = len(t_lines)
+    same = len({d.pixels for d in dets}) == 1
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=lines, unit="line", desc=f"render {sc.name}", file=sys.stderr, dynamic_ncols=True)
+    t_render = t_radio = t_write = 0.0
+    try:
+        with netCDF4.Dataset(str(path), "a") as nc:
+            variables = {}
+            for d in dets:
+                col_dim = "column" if same else f"column_{d.name}"
+                if col_dim not in nc.dimensions:
+                    nc.createDimension(col_dim, d.pixels)
+                v = nc.createVariable(f"image_{d.name}", "u2", ("line", col_dim), zlib=True, complevel=4,
+                                      shuffle=True, chunksizes=(min(block, lines), d.pixels), fill_value=False)
+                v.setncatts({"units": "DN", "band": d.band, "detector": d.name,
+                             "long_name": f"raw image of detector {d.name} ({d.band})"})
+                variables[d.name] = v
+            t = _time.perf_counter()
+            for sl, radiance in renderer.render_blocks(t_lines, block_lines=block,
+                                                       progress=(bar.update if bar is not None else None)):
+                t1 = _time.perf_counter()
+                t_render += t1 - t
+                dn = {name: apply_radiometry(img, inst.radiometry, seed=sc.seed, band_index=i, first_line=sl.start)
+                      for i, (name, img) in enumerate(radiance.items())}
+                t2 = _time.perf_counter()
+                t_radio += t2 - t1
+                for name, img in dn.items():
+                    variables[name][sl.start:sl.stop, :] = img
+                t = _time.perf_counter()
+                t_write += t - t2
+    finally:
+        if bar is not None:
+            bar.close()
+    timings["render_s"] = t_render
+    timings["radiometry_s"] = t_radio
+    timings["write_s"] = timings.get("write_s", 0.0) + t_write
+
+
+def _product_dataset(sc: Scenario, images: dict | None, t_lines, kn, st, known_dem):
     import xarray as xr
 
     inst = sc.instrument
@@ -228,7 +272,7 @@ def _product_dataset(sc: Scenario, images: dict, t_lines, kn, st, known_dem):
     coords = {"line": ("line", np.arange(len(t_lines), dtype=np.int32)),
               "time": ("line", np.asarray(t_lines, dtype=np.float64), {"units": "s", "long_name": "line time"}),
               "detector": ("detector", np.array([d.name for d in dets]))}
-    for d in dets:
+    for d in dets if images is not None else ():
         col_dim = "column" if len(npix) == 1 else f"column_{d.name}"
         data[f"image_{d.name}"] = ((("line", col_dim)), images[d.name],
                                    {"units": "DN", "band": d.band, "detector": d.name,

@@ -341,18 +341,30 @@ class PushbroomRenderer:
         return strip
 
     def render(self, t_lines: np.ndarray, *, block_lines: int = 256, progress=None) -> dict[str, np.ndarray]:
-        """Render every detector at the line times → {name: (L, C) float32 radiance}."""
-        t_start = _time.perf_counter()
+        """Render every detector at the line times → {name: (L, C) float32 radiance}.
+
+        Holds the whole acquisition in memory; :meth:`render_blocks` streams it.
+        """
         out = {d.name: np.empty((len(t_lines), d.pixels), dtype=np.float32) for d in self.instrument.detectors}
+        for sl, block in self.render_blocks(t_lines, block_lines=block_lines, progress=progress):
+            for name, img in block.items():
+                out[name][sl] = img
+        return out
+
+    def render_blocks(self, t_lines: np.ndarray, *, block_lines: int = 256, progress=None):
+        """Render block after block of lines: yields ``(line slice, {name: (l, C) float32 radiance})``.
+
+        Memory is bounded by one block of every detector, whatever the image length.
+        """
         n_blocks = int(np.ceil(len(t_lines) / block_lines))
         for bi in range(n_blocks):
+            t_start = _time.perf_counter()
             sl = slice(bi * block_lines, min(len(t_lines), (bi + 1) * block_lines))
-            for det in self.instrument.detectors:
-                out[det.name][sl] = self.render_block(det, t_lines[sl])
+            block = {det.name: self.render_block(det, t_lines[sl]) for det in self.instrument.detectors}
+            self.stats.wall_s += _time.perf_counter() - t_start
             if progress is not None:
                 progress(sl.stop - sl.start)
-        self.stats.wall_s += _time.perf_counter() - t_start
-        return out
+            yield sl, block
 
     def ray_intersect_ceiling(self, det, t_lines: np.ndarray, *, repeats: int = 3) -> float:
         """Raw ``scene.ray_intersect`` throughput [rays/s] on this block's rays (prepared beforehand)."""
