@@ -157,6 +157,15 @@ def misregistration_floor(product, truth, pairs, settings) -> dict:
 
     series = AttitudeSeries(time=np.asarray(truth["time"].values, dtype=np.float64),
                             **{a: np.asarray(truth[a].values, dtype=np.float64) for a in AXES})
+    import tempfile
+    from pathlib import Path
+
     used = {b for p in pairs for b in (p.ahead, p.behind)}
-    corrected = correct_bands(product, restored=series, column_step=settings.correction_column_step, bands=used)
-    return misregistration(product, corrected, pairs, settings)
+    with tempfile.TemporaryDirectory(prefix="simsat-control-") as tmp:
+        # in a scratch file, block by block: memory bounded by one band, whatever the product's size
+        corrected = correct_bands(product, restored=series, column_step=settings.correction_column_step, bands=used,
+                                  path=Path(tmp) / "corrected_true.nc")
+        try:
+            return misregistration(product, corrected, pairs, settings)
+        finally:
+            corrected.close()

@@ -22,6 +22,7 @@ Never reads ``truth.nc``.
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time as _time
 from dataclasses import dataclass, field
@@ -30,7 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from simsat.config import ScenarioError, Section
-from simsat.product import Product, ProductError, atomic_write_dataset, clamped_attitude, read_product
+from simsat.product import (Product, ProductError, atomic_write_dataset, clamped_attitude, read_product,
+                            temporary_path)
 from simsat.rundir import RunLock, content_id
 
 from .synthesis import AXES, drop_sparse, fill_short_gaps, highpass_nan, instant_synthesis, window_compensation
@@ -316,15 +318,6 @@ def pilot_shift(img_a, img_b, lines_a, cols_a, pred_l, pred_c, n_lines: int, set
     return out[0], out[1]
 
 
-def _grid_points_fallback(image, *, method, per_line, window, margin, line_mask, search=None, max_std=None):
-    n_lines, n_cols = image.shape
-    ml, mc = margin
-    cols = np.linspace(mc + 1, n_cols - mc - 2, per_line)
-    lines = np.flatnonzero(line_mask)
-    L, C = np.meshgrid(lines.astype(float), np.round(cols), indexing="ij")
-    return L.ravel(), C.ravel()
-
-
 def _line_lag(pair: PairData, n_lines: int, max_gap: int) -> np.ndarray:
     """Per-line extra delay of the pair [lines]: mean line residual of its inliers.
 
@@ -394,10 +387,7 @@ def _integrate_time_sync(diffs, taus, lags, te, *, method, settings, sigmas=None
 def match_pair(product: Product, ahead: str, behind: str, settings: RestorationSettings, sm=None) -> PairData:
     """Select points in band ``ahead``, predict them in ``behind``, match them."""
     from .matching import match_points, support_margin
-    try:
-        from .selection import select_points
-    except ImportError:  # selection module in progress
-        select_points = _grid_points_fallback
+    from .selection import select_points_in_blocks
 
     sm = sm or product.sensor_model()
     img_a = product.image(ahead)
@@ -414,9 +404,9 @@ def match_pair(product: Product, ahead: str, behind: str, settings: RestorationS
         raise RestorationError(f"pair {ahead}/{behind}: image too short ({n_lines} lines) for a delay of "
                                f"{shift_lines:.1f} lines")
     usable[lo:hi] = True
-    lines_a, cols_a = select_points(img_a, method=settings.selection, per_line=settings.points_per_line,
-                                    window=settings.window, search=settings.search, margin=(ml, mc),
-                                    line_mask=usable, max_std=settings.texture_max_std_px)
+    lines_a, cols_a = select_points_in_blocks(img_a, method=settings.selection, per_line=settings.points_per_line,
+                                              window=settings.window, search=settings.search, margin=(ml, mc),
+                                              line_mask=usable, max_std=settings.texture_max_std_px)
     name = f"{ahead}/{behind}"
     if lines_a.size == 0:
         return PairData(name=name, ahead=ahead, behind=behind, tau_s=tau, line_a=lines_a, col_a=cols_a,
@@ -472,8 +462,14 @@ def _synthesise(product: Product, pair: PairData, sm, settings: RestorationSetti
 
 
 def restore_product(product: Product, settings: RestorationSettings | None = None, *, progress: bool = False,
-                    run_dir: Path | None = None) -> RestorationResult:
-    """Restore the line-of-sight attitude of a product (never reads truth)."""
+                    run_dir: Path | None = None, corrected_path: Path | None = None,
+                    corrected_attrs: dict | None = None) -> RestorationResult:
+    """Restore the line-of-sight attitude of a product (never reads truth).
+
+    With ``corrected_path``, the corrected images are written there block by
+    block (memory bounded by one band) and ``result.corrected`` is that file
+    opened lazily; otherwise they are kept in memory.
+    """
     from .integration import DEFAULT_METHOD
 
     settings = settings or RestorationSettings()
@@ -618,7 +614,8 @@ def restore_product(product: Product, settings: RestorationSettings | None = Non
             rest_fill = {a: np.where(np.isfinite(restored[a]), restored[a], knowledge[a]) for a in AXES}
             rest_series = _series(t_line, rest_fill)
             corrected = correct_bands(product, restored=rest_series, valid=np.all(
-                [np.isfinite(restored[a]) for a in settings.axes], axis=0), column_step=settings.correction_column_step)
+                [np.isfinite(restored[a]) for a in settings.axes], axis=0), column_step=settings.correction_column_step,
+                path=corrected_path, attrs=corrected_attrs)
             misreg = misregistration(product, corrected, pairs, settings)
         timings["correction_s"] = _time.perf_counter() - t
         bar.step("corrected")
@@ -725,20 +722,26 @@ def restore_run(run_dir: str | Path, *, overrides: dict | None = None, progress:
         ov = overrides.get("restoration", overrides)
         table = {**table, **ov}
     settings = restoration_settings(Section(table, "restoration"))
+    # provenance: which product and settings the outputs come from (checked by the report)
+    pid = str(product.ds.attrs.get("product_id", "")) or content_id(str(product.path))
+    rid = content_id(pid, _settings_dict(settings))
     with RunLock(run_dir, "restore"):
-        res = restore_product(product, settings, progress=progress, run_dir=run_dir)
-        # provenance: which product and settings these outputs come from (checked by the report)
-        pid = str(product.ds.attrs.get("product_id", "")) or content_id(str(product.path))
-        rid = content_id(pid, _settings_dict(settings))
-        ds = restoration_dataset(res)
-        ds.attrs.update(product_id=pid, restoration_id=rid)
-        # corrected.nc first: a restore killed between the two writes leaves a corrected.nc whose
-        # restoration_id no longer matches restoration.nc, which the report refuses
-        corrected = getattr(res, "corrected", None)
-        if corrected is not None:
-            corrected.attrs.update(product_id=pid, restoration_id=rid)
-            atomic_write_dataset(corrected, run_dir / "corrected.nc")
-        elif (run_dir / "corrected.nc").is_file():
-            (run_dir / "corrected.nc").unlink()  # simsat's own output of an earlier restoration: stale now
+        part = temporary_path(run_dir / "corrected.nc")  # written block by block, renamed when complete
+        try:
+            res = restore_product(product, settings, progress=progress, run_dir=run_dir, corrected_path=part,
+                                  corrected_attrs={"product_id": pid, "restoration_id": rid})
+            ds = restoration_dataset(res)
+            ds.attrs.update(product_id=pid, restoration_id=rid)
+            # corrected.nc first: a restore killed between the two writes leaves a corrected.nc whose
+            # restoration_id no longer matches restoration.nc, which the report refuses
+            corrected = getattr(res, "corrected", None)
+            if corrected is not None:
+                corrected.close()
+                os.replace(part, run_dir / "corrected.nc")
+                res.corrected = None
+            elif (run_dir / "corrected.nc").is_file():
+                (run_dir / "corrected.nc").unlink()  # simsat's own output of an earlier restoration: stale now
+        finally:
+            part.unlink(missing_ok=True)
         res.path = atomic_write_dataset(ds, run_dir / "restoration.nc")
     return res

@@ -36,6 +36,7 @@ from .matching import support_margin
 
 __all__ = [
     "estimate_noise",
+    "select_points_in_blocks",
     "gradient_energy",
     "expected_matching_std",
     "texture_mask",
@@ -98,14 +99,60 @@ def estimate_noise(image) -> float:
     float
         Noise standard deviation (image unit).
     """
-    img = _as_image(image)
-    if min(img.shape) < 3:
-        raise ValueError(f"image: need at least 3 x 3 pixels, got {img.shape}")
-    resp = ndimage.correlate(img, _IMMERKAER, mode="nearest")[1:-1, 1:-1]
-    resp = np.abs(resp[np.isfinite(resp)])
-    if resp.size == 0:
+    shape = np.shape(image)
+    if len(shape) != 2 or min(shape) < 3:
+        raise ValueError(f"image: need at least 3 x 3 pixels, got {shape}")
+    blocks = lambda: _immerkaer_blocks(image)  # noqa: E731 - re-run per pass, memory of one block
+    med = _exact_median(blocks)
+    return float(med / (0.6745 * 6.0))
+
+
+def _immerkaer_blocks(image, block_lines: int = 512):
+    """|Immerkaer response| on the image interior, block of lines after block (finite values only)."""
+    n = np.shape(image)[0]
+    for a in range(1, n - 1, block_lines):
+        b = min(n - 1, a + block_lines)
+        sub = np.asarray(image[a - 1:b + 1], dtype=float)
+        resp = ndimage.correlate(sub, _IMMERKAER, mode="nearest")[1:-1, 1:-1]
+        resp = np.abs(resp[np.isfinite(resp)])
+        yield resp
+
+
+def _exact_median(blocks, bins: int = 1 << 16) -> float:
+    """``np.median`` of all values yielded by ``blocks()``, in three passes of bounded memory.
+
+    Pass 1: count and range; pass 2: histogram, locating the bins of the middle
+    order statistics; pass 3: those bins' values, sorted. Equal to
+    ``np.median(np.concatenate(list(blocks())))``.
+    """
+    n, lo, hi = 0, np.inf, -np.inf
+    for v in blocks():
+        if v.size:
+            n += v.size
+            lo, hi = min(lo, float(v.min())), max(hi, float(v.max()))
+    if n == 0:
         return float("nan")
-    return float(np.median(resp) / (0.6745 * 6.0))
+    if hi == lo:
+        return lo
+    ranks = sorted({(n - 1) // 2, n // 2})
+    edges = np.linspace(lo, hi, bins + 1)
+    counts = np.zeros(bins, dtype=np.int64)
+    for v in blocks():
+        counts += np.histogram(v, bins=edges)[0]
+    cum = np.cumsum(counts)
+    chosen = sorted({int(np.searchsorted(cum, r, side="right")) for r in ranks})
+    picked = []
+    for v in blocks():
+        idx = np.clip(np.searchsorted(edges, v, side="right") - 1, 0, bins - 1)  # np.histogram's binning
+        picked.append(v[np.isin(idx, chosen)])
+    vals = np.sort(np.concatenate(picked))
+    below = {k: (int(cum[k - 1]) if k > 0 else 0) for k in chosen}
+    out = []
+    for r in ranks:
+        k = int(np.searchsorted(cum, r, side="right"))
+        offset = sum(int(counts[j]) for j in chosen if j < k)
+        out.append(vals[offset + (r - below[k])])
+    return float(np.mean(out))
 
 
 def gradient_energy(image, *, window=(3, 31)) -> tuple[np.ndarray, np.ndarray]:
@@ -540,3 +587,53 @@ def select_points(image, *, method="grid", per_line=20, window=(3, 31), search=(
     cols = c_lo + np.arange(nb)[None, :] * bw + best
     ll = np.broadcast_to(li[:, None], cols.shape)
     return ll[ok].astype(float), cols[ok].astype(float)
+
+
+def select_points_in_blocks(image, *, block_lines: int = 512, noise_std=None, line_mask=None, mask=None,
+                            method="grid", per_line=20, **options):
+    """:func:`select_points` run on blocks of lines, with the same result and bounded memory.
+
+    The texture maps of :func:`select_points` cost several float64 copies of
+    the image; here they are computed one block at a time, each with enough
+    lines of context around it (filter supports, the double-gradient peak
+    spacing) that the points equal the whole-image ones (exactly for ``grid``
+    and ``double_gradient`` in the tests; ``spread`` may move a tie by one
+    column, from the rounding of the texture maps). The noise is estimated
+    once on the whole image (exact median, bounded memory).
+
+    Parameters
+    ----------
+    image : ndarray (lines, columns)
+    block_lines : int, keyword-only
+        Lines per block.
+    noise_std, line_mask, mask, method, per_line, **options
+        As :func:`select_points`.
+    """
+    n_lines, n_cols = np.shape(image)
+    if noise_std is None:
+        noise_std = estimate_noise(image)
+    context = 32
+    if method == "double_gradient":
+        context = max(context, n_cols // (2 * int(per_line)) + 16)
+    if n_lines <= block_lines + 2 * context:
+        return select_points(image, noise_std=noise_std, line_mask=line_mask, mask=mask, method=method,
+                             per_line=per_line, **options)
+    full_mask = np.ones(n_lines, bool) if line_mask is None else np.asarray(line_mask, bool)
+    if full_mask.shape != (n_lines,):
+        raise ValueError(f"line_mask: expected shape ({n_lines},), got {full_mask.shape}")
+    out_l, out_c = [], []
+    for a in range(0, n_lines, block_lines):
+        b = min(n_lines, a + block_lines)
+        a0, b0 = max(0, a - context), min(n_lines, b + context)
+        lm = np.zeros(b0 - a0, bool)
+        lm[a - a0:b - a0] = full_mask[a:b]
+        if not lm.any():
+            continue
+        li, ci = select_points(np.asarray(image[a0:b0]), noise_std=noise_std, line_mask=lm,
+                               mask=None if mask is None else np.asarray(mask)[a0:b0], method=method,
+                               per_line=per_line, **options)
+        out_l.append(li + a0)
+        out_c.append(ci)
+    if not out_l:
+        return np.zeros(0), np.zeros(0)
+    return np.concatenate(out_l), np.concatenate(out_c)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["atomic_write_dataset", "atomic_write_json", "atomic_write_bytes", "Product", "read_product",
+__all__ = ["atomic_write_dataset", "atomic_write_json", "atomic_write_bytes", "temporary_path", "Product", "read_product",
            "read_truth", "ProductError", "NETCDF_ENCODING", "clamped_attitude", "check_product", "check_image"]
 
 
@@ -45,6 +45,13 @@ def _tmp_path(path: Path) -> Path:
     os.close(fd)
     os.chmod(name, 0o666 & ~_umask())  # mkstemp's 0600 would survive the rename
     return Path(name)
+
+
+def temporary_path(final: str | Path) -> Path:
+    """A fresh temporary file name beside ``final`` (``.NAME.XXXX.part``), for writers that rename when done."""
+    final = Path(final)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    return _tmp_path(final)
 
 
 def make_tmp_dir(final: Path) -> Path:
@@ -111,6 +118,26 @@ def _open(path: Path):
         raise ProductError(f"{path}: cannot read as NetCDF ({type(e).__name__}: {e})") from None
 
 
+def _open_lazy_images(path: Path):
+    """The product with every variable loaded but the band images, which stay in the file.
+
+    ``Product.image`` reads a band when asked (and does not keep it), so a
+    restoration holds only the bands it is working on, whatever the product's size.
+    """
+    import xarray as xr
+
+    if not path.exists():
+        raise ProductError(f"{path}: file not found")
+    try:
+        ds = xr.open_dataset(path, engine="netcdf4", cache=False)
+        small = [v for v in ds.variables if not str(v).startswith("image_")]
+        for v in small:
+            ds[v].load()
+        return ds
+    except Exception as e:  # corrupted / not NetCDF
+        raise ProductError(f"{path}: cannot read as NetCDF ({type(e).__name__}: {e})") from None
+
+
 @dataclass
 class Product:
     """A product as read by the ground segment (never contains truth).
@@ -162,7 +189,7 @@ class Product:
         key = f"image_{name}"
         if key not in self.ds:
             raise ProductError(f"{self.path}: no variable {key!r} (bands: {', '.join(self.band_names)})")
-        img = np.asarray(self.ds[key].values, dtype=np.float32)
+        img = np.asarray(self.ds[key].values, dtype=np.float32)  # read from the file now, not kept
         check_image(img, f"{self.path}: {key}")
         return img
 
@@ -274,7 +301,7 @@ def read_product(run_dir: str | Path) -> Product:
         p = p / "product.nc"
     if not p.exists():
         raise ProductError(f"{p}: product file not found (run `simsat render SCENARIO --out DIR` first)")
-    ds = _open(p)
+    ds = _open_lazy_images(p)
     check_product(ds, p)
     try:
         a = ds.attrs

@@ -181,3 +181,33 @@ def test_select_points_line_mask_and_step(scene):
 def test_select_points_bad_parameters(scene, kw, name):
     with pytest.raises(ValueError, match=name):
         select_points(scene, **kw)
+
+
+def test_noise_estimate_in_blocks_is_the_exact_median():
+    from scipy import ndimage
+
+    from restore.selection import _IMMERKAER, estimate_noise
+
+    rng = np.random.default_rng(3)
+    for shape in [(3, 3), (5, 4), (1300, 41)]:
+        img = np.round(rng.normal(100, 5, shape) * (1 + rng.random(shape)))  # many ties
+        resp = np.abs(ndimage.correlate(img.astype(float), _IMMERKAER, mode="nearest")[1:-1, 1:-1])
+        assert estimate_noise(img) == float(np.median(resp) / (0.6745 * 6.0))
+
+
+@pytest.mark.parametrize("method", ["grid", "double_gradient"])
+def test_selection_in_blocks_equals_the_whole_image(method):
+    from restore.selection import select_points, select_points_in_blocks
+
+    rng = np.random.default_rng(4)
+    from scipy import ndimage
+    img = ndimage.gaussian_filter(rng.normal(0, 1, (1400, 200)), 2.0) * 200 + 1000 + rng.normal(0, 2, (1400, 200))
+    img[600:700, 50:120] = 1000.0  # a flat patch (no texture) across a block edge
+    lm = np.ones(1400, bool)
+    lm[:20] = False
+    kw = dict(method=method, per_line=12, window=(3, 31), search=(3, 3), line_mask=lm, max_std=0.4)
+    a = select_points(img, **kw)
+    b = select_points_in_blocks(img, block_lines=256, **kw)
+    assert a[0].size > 1000
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
