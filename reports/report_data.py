@@ -37,7 +37,7 @@ __all__ = [
     "AXES", "RunData", "load_run", "read_product_light", "get_integrator", "scenario_summary", "restored_axes",
     "attitude_table", "headline", "minmax_decimate", "zoom_window", "longest_finite_run", "welch_settings",
     "spectra", "integration_probe", "measured_transfer", "analytic_chain_gain", "analytic_joint_gain",
-    "wiener_k", "true_differentials", "line_lags", "error_budget", "freeze_integration", "frozen_chain_gain",
+    "wiener_k", "true_differentials", "line_lags", "error_budget", "freeze_integration", "frozen_chain_gain", "probe_window_gain",
     "axis_integration", "measured_differentials", "match_density", "misregistration_rows",
     "scene_geometry", "pair_file_tag",
 ]
@@ -732,6 +732,33 @@ def frozen_chain_gain(freq_hz, taus: Sequence[float], spectrum: dict, te: float)
         g2 = 2.0 * (1.0 - np.cos(2.0 * np.pi * f * tau))
         acc += g2 * s / max(sj * sj * te, 1e-300)
     return acc / (1.0 + acc)
+
+
+def probe_window_gain(freq_hz, taus: Sequence[float], spectrum: dict, te: float, n: int, *,
+                      oversample: int = 16) -> np.ndarray:
+    """:func:`frozen_chain_gain` as :func:`integration_probe` sees it: averaged over its spectral window.
+
+    The probe estimates the gain by Welch cross-spectra (Hann segments of
+    ``welch_settings(2 n)["nperseg"]`` samples), i.e. the filter's gain
+    averaged over the Hann window's spectral kernel |W(ν)|² (a main lobe of
+    ± 2 bins). A prior estimated from quasi-harmonic jitter has lines
+    narrower than that, where the point formula jumps between 0 and 1 and the
+    probe cannot: comparing like with like needs the same averaging.
+    """
+    from scipy.signal import get_window
+
+    f = np.asarray(freq_hz, dtype=np.float64)
+    nps = welch_settings(2 * n)["nperseg"]
+    fs = 1.0 / te
+    w = get_window("hann", nps)
+    kern = np.abs(np.fft.fft(w, nps * oversample)) ** 2
+    kern /= kern.sum()
+    off = np.fft.fftfreq(nps * oversample, te)
+    keep = kern > kern.max() * 1e-6
+    kern, off = kern[keep] / kern[keep].sum(), off[keep]
+    fine = np.arange(0.0, fs / 2 + fs / (nps * oversample), fs / (nps * oversample))
+    g = frozen_chain_gain(fine, taus, spectrum, te)
+    return np.array([np.sum(kern * np.interp(np.abs(fi - off), fine, g)) for fi in f])
 
 
 def integration_probe(taus: Sequence[float], te: float, n: int, *, integrate: Callable, method: str | None,

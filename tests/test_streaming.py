@@ -20,3 +20,17 @@ def test_block_resampling_equals_whole_image_splines():
     assert SPLINE_MARGIN_LINES >= 12
     np.testing.assert_allclose(blocks, whole, rtol=0, atol=1e-3)  # float32 rounding of ~500 DN
     assert np.array_equal(np.isnan(blocks), np.isnan(whole))
+
+
+def test_probe_window_gain_is_the_formula_averaged_over_the_hann_kernel():
+    """A flat prior gives the point formula back; a line narrower than a bin is spread over the main lobe."""
+    from reports.report_data import frozen_chain_gain, probe_window_gain
+
+    te, n, taus = 4e-4, 4000, [7.4e-3]
+    f = np.linspace(5.0, 120.0, 47)
+    flat = {"freq": np.array([0.0, 1250.0]), "psd": np.array([1e-12, 1e-12]), "noise_std": np.array([1e-7])}
+    np.testing.assert_allclose(probe_window_gain(f, taus, flat, te, n), frozen_chain_gain(f, taus, flat, te), atol=2e-3)
+    line = {"freq": np.array([0.0, 59.9, 60.0, 60.1, 1250.0]), "psd": np.array([0, 0, 1e-9, 0, 0]),
+            "noise_std": np.array([1e-7])}
+    g = probe_window_gain(np.array([60.0, 61.0, 70.0]), taus, line, te, n)
+    assert 0 < g[0] < 0.5 and g[1] > 0 and g[2] < 1e-6  # spread over ± one 2.4 Hz bin, nothing 10 Hz away
