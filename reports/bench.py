@@ -16,7 +16,7 @@ from simsat.product import atomic_write_json
 #: where the benches write their scratch runs (rendered products they restore and score)
 SCRATCH_DIR = Path("bench") / "scratch"
 
-__all__ = ["run_bench", "format_result", "bench_render", "bench_restore"]
+__all__ = ["run_bench", "format_result", "bench_render", "bench_restore", "bench_memory", "SCRATCH_DIR"]
 
 
 def _peak_rss_gb() -> float:
@@ -193,6 +193,61 @@ def bench_scaling(*, scenario: str = "phr_cmg", sizes=(1000, 2000), known: dict 
     return out
 
 
+_PEAK_SNIPPET = (
+    "import resource, sys\n"
+    "from simsat.cli import main\n"
+    "rc = main(sys.argv[1:])\n"
+    "print('SIMSAT_PEAK_KB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\n"
+    "sys.exit(rc)\n")
+
+
+def _measured_command(argv: list) -> dict:
+    """Run ``simsat ARGV`` in a fresh Python process: its wall time and peak RSS [GB]."""
+    t0 = _time.perf_counter()
+    p = subprocess.run([sys.executable, "-c", _PEAK_SNIPPET, *argv], capture_output=True, text=True)
+    wall = _time.perf_counter() - t0
+    peak = [ln for ln in p.stderr.splitlines() if ln.startswith("SIMSAT_PEAK_KB")]
+    if p.returncode != 0 or not peak:
+        tail = (p.stderr.strip().splitlines() or ["(no message)"])[-1]
+        raise RuntimeError(f"simsat {' '.join(argv)} failed: {tail}")
+    return {"wall_s": wall, "peak_rss_gb": int(peak[-1].split()[1]) / 1024 ** 2}
+
+
+def bench_memory(*, scenario: str | None = None, lines: int | None = None,
+                 lengths=(4000, 16000, 50000)) -> dict:
+    """Peak RSS of render, restore and report, each in its own process, against image length.
+
+    Parameters
+    ----------
+    scenario : str, optional
+        Scenario (default phr_cmg).
+    lines : int, optional
+        Measure this one length instead of ``lengths``.
+    lengths : sequence of int
+        Image lengths [lines].
+
+    Returns
+    -------
+    dict
+        ``rows``: one per length with ``render``, ``restore``, ``report`` → {wall_s, peak_rss_gb}.
+    """
+    sc = scenario or "phr_cmg"
+    rows = []
+    for n in ([lines] if lines else list(lengths)):
+        rd = SCRATCH_DIR / f"memory_{Path(sc).stem}_{n}"
+        row = {"lines": int(n)}
+        for stage, argv in (("render", ["render", sc, "--out", str(rd), "--set", f"acquisition.lines={n}",
+                                        "--quiet", "--force"]),
+                            ("restore", ["restore", str(rd), "--quiet"]),
+                            ("report", ["report", str(rd), "--quiet"])):
+            print(f"bench memory: {stage} {sc}, {n} lines ({rd}) ...", file=sys.stderr, flush=True)
+            row[stage] = _measured_command(argv)
+            print(f"bench memory:   {row[stage]['peak_rss_gb']:.2f} GB peak, {row[stage]['wall_s']:.0f} s",
+                  file=sys.stderr, flush=True)
+        rows.append(row)
+    return {"scenario": sc, "rows": rows, "cpu_count": os.cpu_count(), "scratch": str(SCRATCH_DIR)}
+
+
 def run_bench(what: str, *, scenario: str | None = None, out: str | None = None, lines: int | None = None,
               seed: int = 0) -> dict:
     """Run one benchmark, write its JSON, return the result (with ``_path``)."""
@@ -207,6 +262,8 @@ def run_bench(what: str, *, scenario: str | None = None, out: str | None = None,
     elif what == "integration":
         from reports.bench_integration import bench_integration
         result = bench_integration(seed=seed)
+    elif what == "memory":
+        result = bench_memory(scenario=scenario, lines=lines)
     else:
         raise ValueError(f"what: unknown benchmark {what!r}")
     result = {"benchmark": what, "result": result, "wall_s": _time.perf_counter() - t0,
@@ -269,6 +326,13 @@ def _format_scaling(s: dict) -> list:
 def format_result(what: str, result: dict) -> str:
     r = result["result"]
     lines = []
+    if what == "memory":
+        lines.append(f"peak RSS per process, {r['scenario']} ({r['cpu_count']} cores; scratch runs in {r['scratch']})")
+        lines.append(f"  {'lines':>7s}  {'render':>16s}  {'restore':>16s}  {'report':>16s}")
+        for row in r["rows"]:
+            cells = [f"{row[k]['peak_rss_gb']:5.2f} GB {row[k]['wall_s']:5.0f} s" for k in ("render", "restore", "report")]
+            lines.append(f"  {row['lines']:7d}  " + "  ".join(f"{c:>16s}" for c in cells))
+        return "\n".join(lines)
     if what == "render":
         for key in ("main", "phr_full"):
             m = r.get(key)

@@ -271,9 +271,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_figures)
 
     s = sub.add_parser("bench", help="benchmarks (results printed and written as JSON)")
-    s.add_argument("what", choices=["render", "restore", "matching", "integration"])
+    s.add_argument("what", choices=["render", "restore", "matching", "integration", "memory"],
+                   help="what to measure (memory: peak RSS of render, restore and report at 4 000, 16 000 and "
+                        "50 000 lines, each in its own process)")
     s.add_argument("--scenario", default=None, help="scenario (render/restore; default phr_cmg)")
-    s.add_argument("--lines", type=int, default=None, help="override acquisition.lines")
+    s.add_argument("--lines", type=int, default=None, help="override acquisition.lines (memory: measure this length only)")
     s.add_argument("--seed", type=int, default=0, help="scenario seed of the bench runs (default: %(default)s)")
     s.add_argument("--out", default=None, help="JSON output file (default bench/<what>.json)")
     s.set_defaults(func=cmd_bench)
