@@ -199,6 +199,9 @@ def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> Simulati
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    del renderer, model, dem, known_dem, texture, irr
+    from .render import release_memory
+    release_memory()
     return SimulationResult(out_dir=out_dir, timings=timings, render_stats=render_stats, replaced=replaced)
 
 

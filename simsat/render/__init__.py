@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["choose_variant", "MITSUBA_FROM_LOCAL"]
+__all__ = ["choose_variant", "release_memory", "MITSUBA_FROM_LOCAL"]
 
 #: Axis change between simsat's local frame and Mitsuba's world frame. simsat's
 #: local frame (x along-track, y across-track, z up, metres, centred on the
@@ -50,3 +50,16 @@ def choose_variant() -> str:
         except Exception as e:  # no GPU / no LLVM: try the next one
             errors.append(f"{v}: {e}".splitlines()[0])
     raise RuntimeError("no usable Mitsuba variant: " + "; ".join(errors))
+
+
+def release_memory() -> None:
+    """Give back the memory Dr.Jit keeps cached after a render (so later stages of one process start lean)."""
+    import gc
+
+    gc.collect()
+    if _VARIANT is None:
+        return
+    import drjit as dr
+
+    dr.sync_thread()
+    dr.flush_malloc_cache()
