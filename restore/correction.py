@@ -334,11 +334,13 @@ def misregistration(product, corrected, pairs, settings) -> dict:
         before = per_line_shift_rms(np.rint(la), p.meas_line_b[v] - pl, p.meas_col_b[v] - pc, n_lines, cols=ca,
                                     weights_l=_inverse_variance(None if p.std_line is None else p.std_line[v]),
                                     weights_c=_inverse_variance(None if p.std_col is None else p.std_col[v]))
-        ia = np.array(corrected[f"image_{p.ahead}"].values)  # own copies, made NaN-free in place
-        ib = np.array(corrected[f"image_{p.behind}"].values)
+        # read from a file (no cache): fresh arrays, made NaN-free in place; in memory: copies
+        from_file = bool(getattr(corrected, "encoding", {}).get("source"))
+        ia = np.asarray(corrected[f"image_{p.ahead}"].values)
+        ib = np.asarray(corrected[f"image_{p.behind}"].values)
         ok = np.isfinite(ia[np.clip(np.rint(la).astype(int), 0, ia.shape[0] - 1), np.clip(np.rint(ca).astype(int), 0, ia.shape[1] - 1)])
-        np.nan_to_num(ia, copy=False)
-        np.nan_to_num(ib, copy=False)
+        ia = np.nan_to_num(ia, copy=not from_file)
+        ib = np.nan_to_num(ib, copy=not from_file)
         m = match_points(ia, ib, la[ok], ca[ok], pl[ok], pc[ok], window=settings.window,
                          search=settings.search, method=settings.match_method, min_quality=settings.min_quality)
         del ia, ib
