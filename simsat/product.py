@@ -177,8 +177,15 @@ class Product:
     def pixel_ifov_rad(self) -> float:
         return self.instrument.ifov_rad(self.reference_detector)
 
-    def image(self, name: str) -> np.ndarray:
-        """Band image as float32 (DN).
+    def image(self, name: str, *, lines: slice | None = None) -> np.ndarray:
+        """Band image as float32 (DN), read from the file now (not kept).
+
+        Parameters
+        ----------
+        name : str
+            Band name.
+        lines : slice, optional
+            Read only these lines (a block: memory bounded by the block, not the image).
 
         Raises
         ------
@@ -189,6 +196,11 @@ class Product:
         key = f"image_{name}"
         if key not in self.ds:
             raise ProductError(f"{self.path}: no variable {key!r} (bands: {', '.join(self.band_names)})")
+        if lines is not None:  # a block: only finite values checked (a dark block may be all zero)
+            img = np.asarray(self.ds[key][lines].values, dtype=np.float32)
+            if not np.isfinite(img).all():
+                check_image(img, f"{self.path}: {key}")
+            return img
         img = np.asarray(self.ds[key].values, dtype=np.float32)  # read from the file now, not kept
         check_image(img, f"{self.path}: {key}")
         return img
