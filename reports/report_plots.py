@@ -49,11 +49,11 @@ def nice_f_max(freq, psd, fs: float, *, fraction: float = 0.995, floor_hz: float
     return float(min(f, nyq))
 
 
-def _px_axis(ax, ifov_rad: float):
-    """Secondary y axis in pixels for an axis drawn in µrad."""
+def _px_axis(ax, ifov_rad: float, label: str = "px"):
+    """Secondary y axis in pixels for an axis drawn in µrad (``ifov_rad``: the angle of one pixel)."""
     k = ifov_rad * URAD
     sec = ax.secondary_yaxis("right", functions=(lambda u: u / k, lambda p: p * k))
-    sec.set_ylabel("px", fontsize=9)
+    sec.set_ylabel(label, fontsize=9)
     sec.tick_params(labelsize=8)
     return sec
 
@@ -69,7 +69,8 @@ def attitude_figure():
     return fig, axs
 
 
-def draw_attitude(axs, att: dict, axis: str, *, ifov_rad: float, zoom: tuple, max_points: int = 3000,
+def draw_attitude(axs, att: dict, axis: str, *, ifov_rad: float, zoom: tuple, yaw_half_field_px: float | None = None,
+                  max_points: int = 3000,
                   restored: bool = True):
     """True / knowledge / restored ``axis`` over time, and the errors, with a zoom.
 
@@ -115,7 +116,11 @@ def draw_attitude(axs, att: dict, axis: str, *, ifov_rad: float, zoom: tuple, ma
     if axs[0, 1].lines:
         axs[0, 0].axvspan((z0 - t0) * 1e3, (z1 - t0) * 1e3, color="0.85", zorder=0, lw=0)
     for ax in (axs[0, 1], axs[1, 1]):
-        _px_axis(ax, ifov_rad)
+        if axis == "yaw":
+            if yaw_half_field_px:  # yaw moves the image by (offset from the field centre) × angle
+                _px_axis(ax, 1.0 / yaw_half_field_px, label="image shift at the field edge [px]")
+        else:
+            _px_axis(ax, ifov_rad)
     handles, labels = [], []
     for ax in (axs[0, 0], axs[1, 0]):
         h, lab = ax.get_legend_handles_labels()

@@ -261,7 +261,10 @@ def _attitude_section(pg: _Page, run: D.RunData, sc: dict, hd: dict):
     link = pg.csv("attitude.csv", table)
     for a in D.AXES:
         fig, axs = RP.attitude_figure()
-        RP.draw_attitude(axs, att, a, ifov_rad=sc["ifov_rad"], zoom=zoom,
+        ref = run.product.reference_detector
+        half = next((d.pixels for d in run.product.instrument.detectors if d.name == ref),
+                    run.product.instrument.detectors[0].pixels) / 2.0
+        RP.draw_attitude(axs, att, a, ifov_rad=sc["ifov_rad"], zoom=zoom, yaw_half_field_px=half,
                          restored=(a in sc["restored_axes"]) or run.restoration is None)
         extra = ""
         d = hd["axes"][a]
