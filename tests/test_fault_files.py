@@ -171,3 +171,26 @@ def test_read_only_run_directory(capsys, tmp_path, restored):  # pragma: no cove
         assert rc == 2 and str(d) in err
     finally:
         os.chmod(d, 0o755)
+
+
+def test_unwritable_run_directory_is_one_line(capsys, tmp_path, restored, monkeypatch):
+    """As root permissions are not enforced, so the refusal is injected where simsat first writes."""
+    import errno
+
+    import simsat.rundir as rundir
+
+    d = _copy(restored, tmp_path / "run")
+    real_open = os.open
+
+    def refuse(path, *a, **k):
+        if str(path).startswith(str(d)):
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real_open(path, *a, **k)
+
+    monkeypatch.setattr(rundir.os, "open", refuse)
+    for argv in (["restore", str(d), "--quiet"], ["render", "tiny", "--out", str(d), "--quiet"],
+                 ["report", str(d), "--quiet"]):
+        rc, err = _run(capsys, *argv)
+        assert rc == 2 and str(d) in err and "Permission denied" in err, (argv, err)
+        assert err.count("\n") == 1
+    assert sorted(p.name for p in d.iterdir()) == sorted(p.name for p in restored.iterdir() if not p.name.startswith("."))
