@@ -276,6 +276,8 @@ class SensorModel:
             deriv = (f1 - f0) / h
             step = -f0 / deriv
             step = np.clip(step, -50 * te, 50 * te)
+            ok &= np.isfinite(step)  # a NaN ground point (or a flat residual) stays out, never a NaN time
+            step = np.where(ok, step, 0.0)
             t = t + step
             if np.nanmax(np.abs(step)) < tol_line * te:
                 break

@@ -63,3 +63,21 @@ def test_product_does_not_depend_on_block_lines_and_lazy_blocks_equal_full_read(
     block = p.image("B1", lines=slice(37, 91))
     assert block.shape == (54, full.shape[1]) and block.dtype == np.float32
     np.testing.assert_array_equal(block, full[37:91])
+
+
+def test_inverse_location_of_a_nan_ground_point_is_nan_not_an_error(tmp_path):
+    """A point direct location could not place (NaN) stays NaN; the others are located as alone."""
+    from simsat.product import read_product
+    from simsat.scenario import load_scenario
+    from simsat.simulate import simulate
+
+    simulate(load_scenario("tiny", overrides={"acquisition": {"lines": 150}}), tmp_path / "r", progress=False)
+    sm = read_product(tmp_path / "r").sensor_model()
+    g = sm.direct_location("B0", np.array([40.0, 75.0]), np.array([30.0, 60.0]))
+    alone_l, alone_c = sm.inverse_location("B0", g)
+    gg = np.vstack([g, np.full((1, 3), np.nan)])
+    ll, cc = sm.inverse_location("B0", gg)
+    np.testing.assert_allclose(alone_l, [40.0, 75.0], atol=1e-3)
+    np.testing.assert_array_equal(ll[:2], alone_l)
+    np.testing.assert_array_equal(cc[:2], alone_c)
+    assert np.isnan(ll[2]) and np.isnan(cc[2])
