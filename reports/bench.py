@@ -208,8 +208,11 @@ def _measured_command(argv: list) -> dict:
     wall = _time.perf_counter() - t0
     peak = [ln for ln in p.stderr.splitlines() if ln.startswith("SIMSAT_PEAK_KB")]
     if p.returncode != 0 or not peak:
-        tail = (p.stderr.strip().splitlines() or ["(no message)"])[-1]
-        raise RuntimeError(f"simsat {' '.join(argv)} failed: {tail}")
+        from simsat.cli import CliError
+
+        said = [ln for ln in p.stderr.splitlines() if ln.strip() and not ln.startswith("SIMSAT_PEAK_KB")]
+        raise CliError(f"bench memory: simsat {' '.join(argv)} failed (exit {p.returncode}): "
+                       f"{(said or ['(no message)'])[-1].strip()}")
     return {"wall_s": wall, "peak_rss_gb": int(peak[-1].split()[1]) / 1024 ** 2}
 
 
