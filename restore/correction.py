@@ -305,6 +305,9 @@ def _inverse_variance(std, floor: float = 0.02):
     return None if std is None else 1.0 / (std ** 2 + floor ** 2)
 
 
+_MISREG_BLOCK = 1024  #: lines of corrected band read at a time by the misregistration measurement
+
+
 def misregistration(product, corrected, pairs, settings) -> dict:
     """Band-to-band misregistration of each pair before and after correction.
 
@@ -319,7 +322,7 @@ def misregistration(product, corrected, pairs, settings) -> dict:
     (split-half) estimate: ``after_signal_px`` is the figure to compare with
     a requirement, ``after_px`` includes the measurement noise.
     """
-    from .matching import match_points
+    from .matching import match_points_in_blocks
 
     sm = product.sensor_model()
     out = {}
@@ -334,16 +337,25 @@ def misregistration(product, corrected, pairs, settings) -> dict:
         before = per_line_shift_rms(np.rint(la), p.meas_line_b[v] - pl, p.meas_col_b[v] - pc, n_lines, cols=ca,
                                     weights_l=_inverse_variance(None if p.std_line is None else p.std_line[v]),
                                     weights_c=_inverse_variance(None if p.std_col is None else p.std_col[v]))
-        # read from a file (no cache): fresh arrays, made NaN-free in place; in memory: copies
-        from_file = bool(getattr(corrected, "encoding", {}).get("source"))
-        ia = np.asarray(corrected[f"image_{p.ahead}"].values)
-        ib = np.asarray(corrected[f"image_{p.behind}"].values)
-        ok = np.isfinite(ia[np.clip(np.rint(la).astype(int), 0, ia.shape[0] - 1), np.clip(np.rint(ca).astype(int), 0, ia.shape[1] - 1)])
-        ia = np.nan_to_num(ia, copy=not from_file)
-        ib = np.nan_to_num(ib, copy=not from_file)
-        m = match_points(ia, ib, la[ok], ca[ok], pl[ok], pc[ok], window=settings.window,
-                         search=settings.search, method=settings.match_method, min_quality=settings.min_quality)
-        del ia, ib
+        # the corrected bands are read block by block (from corrected.nc when it is a file): memory
+        # bounded by a block of lines, whatever the image length
+        var_a, var_b = corrected[f"image_{p.ahead}"], corrected[f"image_{p.behind}"]
+        n_a, n_b = int(var_a.shape[0]), int(var_b.shape[0])
+        li = np.clip(np.rint(la).astype(int), 0, n_a - 1)
+        ci = np.clip(np.rint(ca).astype(int), 0, int(var_a.shape[1]) - 1)
+        ok = np.zeros(la.size, dtype=bool)
+        for a0 in range(0, n_a, _MISREG_BLOCK):
+            sel = (li >= a0) & (li < a0 + _MISREG_BLOCK)
+            if sel.any():
+                rows = np.asarray(var_a[a0:a0 + _MISREG_BLOCK].values)
+                ok[sel] = np.isfinite(rows[li[sel] - a0, ci[sel]])
+
+        def reader(var):
+            return lambda s: np.nan_to_num(np.asarray(var[s].values, dtype=np.float32))
+
+        m = match_points_in_blocks(reader(var_a), reader(var_b), (n_a, n_b), la[ok], ca[ok], pl[ok], pc[ok],
+                                   block_lines=_MISREG_BLOCK, window=settings.window, search=settings.search,
+                                   method=settings.match_method, min_quality=settings.min_quality)
         good = np.asarray(m.valid, bool)
         after = per_line_shift_rms(np.rint(la[ok][good]), m.line_b[good] - pl[ok][good], m.col_b[good] - pc[ok][good],
                                    n_lines, cols=ca[ok][good], weights_l=_inverse_variance(m.std_line[good]),

@@ -68,6 +68,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 __all__ = [
+    "match_points_in_blocks",
     "MatchFlag",
     "MatchResult",
     "match_points",
@@ -772,3 +773,66 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
         "line_b": c0_l + off_l + (la - ra_l), "col_b": c0_c + off_c + (ca - ra_c),
         "quality": quality, "valid": flags == 0, "flags": flags, "std_line": std_l, "std_col": std_c,
     }
+
+
+def match_points_in_blocks(read_a, read_b, n_lines: tuple, lines_a, cols_a, pred_lines_b, pred_cols_b, *,
+                           block_lines: int = 1024, **options) -> MatchResult:
+    """:func:`match_points` on blocks of points, reading only the image lines each block needs.
+
+    Parameters
+    ----------
+    read_a, read_b : callable
+        ``read(slice) -> ndarray (lines, columns)``: those lines of band A / B.
+    n_lines : (int, int)
+        Number of lines of A and of B.
+    lines_a, cols_a, pred_lines_b, pred_cols_b, **options
+        As :func:`match_points`.
+    block_lines : int, keyword-only
+        Lines of A per block of points.
+
+    Returns
+    -------
+    MatchResult
+        The same as :func:`match_points` on the whole images: each block reads
+        its points' lines plus the matcher's support margin and 8 more lines
+        (the Gauss-Newton steps move the window by at most the search range,
+        already in the margin), so no window sees a block edge that is not an
+        image edge.
+    """
+    la = np.asarray(lines_a, dtype=np.float64)
+    ca = np.asarray(cols_a, dtype=np.float64)
+    pl = np.asarray(pred_lines_b, dtype=np.float64)
+    pc = np.asarray(pred_cols_b, dtype=np.float64)
+    n = la.size
+    margin = support_margin(window=options.get("window", (3, 31)), search=options.get("search", (2, 2)),
+                            order=options.get("order", 4))[0] + 8
+    fields = {k: None for k in ("line_b", "col_b", "quality", "valid", "flags", "std_line", "std_col")}
+    parts = []
+    idx_all = np.arange(n)
+    for a in range(0, int(n_lines[0]), block_lines):
+        sel = idx_all[(np.rint(la) >= a) & (np.rint(la) < a + block_lines)]
+        if sel.size == 0:
+            continue
+        a0, a1 = max(0, a - margin), min(int(n_lines[0]), a + block_lines + margin)
+        fin = pl[sel][np.isfinite(pl[sel])]
+        lo = int(np.floor(fin.min())) if fin.size else 0
+        hi = int(np.ceil(fin.max())) if fin.size else 0
+        b0, b1 = max(0, lo - margin), min(int(n_lines[1]), hi + margin + 1)
+        if b1 - b0 < 1:
+            b0, b1 = 0, min(int(n_lines[1]), 1)
+        m = match_points(read_a(slice(a0, a1)), read_b(slice(b0, b1)), la[sel] - a0, ca[sel], pl[sel] - b0, pc[sel],
+                         **options)
+        parts.append((sel, m, b0))
+    out = {}
+    for k in fields:
+        proto = getattr(parts[0][1], k) if parts else np.zeros(0)
+        arr = np.zeros(n, dtype=np.asarray(proto).dtype)
+        if arr.dtype.kind == "f":
+            arr[:] = np.nan
+        elif k == "flags":
+            arr[:] = int(MatchFlag.OUT_OF_BOUNDS)  # a point on no image line
+        for sel, m, b0 in parts:
+            v = np.asarray(getattr(m, k))
+            arr[sel] = v + b0 if k == "line_b" else v
+        out[k] = arr
+    return MatchResult(**out)

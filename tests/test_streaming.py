@@ -81,3 +81,29 @@ def test_inverse_location_of_a_nan_ground_point_is_nan_not_an_error(tmp_path):
     np.testing.assert_array_equal(ll[:2], alone_l)
     np.testing.assert_array_equal(cc[:2], alone_c)
     assert np.isnan(ll[2]) and np.isnan(cc[2])
+
+
+def test_matching_in_blocks_equals_whole_image_matching():
+    """Same matches from blocks of lines (each with the matcher's margin) as from the whole images."""
+    from scipy import ndimage
+
+    from restore.matching import match_points, match_points_in_blocks
+
+    rng = np.random.default_rng(8)
+    a = ndimage.gaussian_filter(rng.normal(0, 1, (900, 120)), 1.5).astype(np.float32) * 300 + 1000
+    shift_l, shift_c = 0.37, -0.61            # B is A translated by a known sub-pixel shift
+    b = ndimage.shift(a.astype(np.float64), (shift_l, shift_c), order=3, mode="nearest").astype(np.float32)
+    la = rng.uniform(5, 895, 3000).round()
+    ca = rng.uniform(20, 100, 3000).round()
+    kw = dict(window=(3, 31), search=(3, 3), method="ncc", min_quality=0.5)
+    whole = match_points(a, b, la, ca, la + 0.2, ca - 0.2, **kw)
+    blocks = match_points_in_blocks(lambda s: a[s], lambda s: b[s], (900, 900), la, ca, la + 0.2, ca - 0.2,
+                                    block_lines=128, **kw)
+    np.testing.assert_array_equal(blocks.valid, whole.valid)
+    np.testing.assert_array_equal(blocks.flags, whole.flags)
+    np.testing.assert_allclose(blocks.line_b, whole.line_b, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(blocks.col_b, whole.col_b)
+    ok = whole.valid
+    assert ok.mean() > 0.8
+    assert abs(np.median(whole.line_b[ok] - la[ok]) - shift_l) < 0.02  # the known shift is found
+    assert abs(np.median(whole.col_b[ok] - ca[ok]) - shift_c) < 0.02
