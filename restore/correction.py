@@ -47,15 +47,18 @@ def resampling_grid(product, band: str, restored, *, column_step: int = 16, line
 SPLINE_MARGIN_LINES = 16
 
 
-def correct_band_block(img: np.ndarray, rl: np.ndarray, rc: np.ndarray) -> np.ndarray:
+def correct_band_block(img, rl: np.ndarray, rc: np.ndarray, *, n_lines: int | None = None) -> np.ndarray:
     """Resample raw image rows at (rl, rc) by cubic splines, reading only the rows they need.
 
     Parameters
     ----------
-    img : ndarray (L, C)
-        The whole raw band (float32 DN).
+    img : ndarray (L, C), or callable
+        The whole raw band (float32 DN), or ``read(slice) -> rows`` of it
+        (then ``n_lines`` is required).
     rl, rc : ndarray (l, C)
         Raw-image coordinates [px] of a block of output pixels.
+    n_lines : int, optional
+        Lines of the raw band when ``img`` is a reader.
 
     Returns
     -------
@@ -64,16 +67,21 @@ def correct_band_block(img: np.ndarray, rl: np.ndarray, rc: np.ndarray) -> np.nd
     """
     from scipy.ndimage import map_coordinates
 
-    n_lines, n_cols = img.shape
-    inside = (rl >= 0) & (rl <= n_lines - 1) & (rc >= 0) & (rc <= n_cols - 1)
+    if callable(img):
+        read, total = img, int(n_lines)
+    else:
+        read, total = (lambda s: img[s]), img.shape[0]
+    n_cols = rl.shape[1] if rl.ndim == 2 else None
     finite_l = rl[np.isfinite(rl)]
     if finite_l.size == 0:
         return np.full(rl.shape, np.nan, np.float32)
     r0 = int(max(0, np.floor(finite_l.min()) - SPLINE_MARGIN_LINES))
-    r1 = int(min(n_lines, np.ceil(finite_l.max()) + SPLINE_MARGIN_LINES + 1))
+    r1 = int(min(total, np.ceil(finite_l.max()) + SPLINE_MARGIN_LINES + 1))
     if r1 - r0 < 2:
-        r0, r1 = max(0, r0 - 1), min(n_lines, r0 + 2)
-    sub = img[r0:r1].astype(np.float64)
+        r0, r1 = max(0, min(r0, total - 2)), min(total, max(r0, 0) + 2)
+    sub = np.asarray(read(slice(r0, r1)), dtype=np.float64)
+    n_cols = sub.shape[1]
+    inside = (rl >= 0) & (rl <= total - 1) & (rc >= 0) & (rc <= n_cols - 1)
     out = map_coordinates(sub, [np.nan_to_num(rl) - r0, np.nan_to_num(rc)], order=3, mode="nearest",
                           prefilter=True).astype(np.float32)
     out[~inside] = np.nan
@@ -138,15 +146,16 @@ def correct_bands(product, *, restored, valid=None, column_step: int = 16, bands
                 var.setncatts({"units": "DN", "long_name": long_name})
             else:
                 var = np.empty((n_lines, det.pixels), np.float32)
-            img = product.image(name)
+            def read(rows, name=name):
+                return product.image(name, lines=rows)  # only the raw lines this block needs
+
             for a in range(0, n_lines, block_lines):
                 sl = slice(a, min(n_lines, a + block_lines))
                 rl, rc = resampling_grid(product, name, restored, column_step=column_step, lines=sl)
-                out = correct_band_block(img, rl, rc)
+                out = correct_band_block(read, rl, rc, n_lines=n_lines)
                 if valid is not None:
                     out[~valid[sl]] = np.nan
                 var[sl] = out
-            del img
             if nc is None:
                 data[f"image_{name}"] = (dims, var, {"units": "DN", "long_name": long_name})
     finally:
