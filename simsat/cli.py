@@ -158,7 +158,8 @@ def cmd_restore(args) -> int:
     res = restore_run(args.run_dir, overrides=_parse_set(args.set), progress=not args.quiet)
     if not args.quiet:
         print(res.summary())
-    print(_summary(Path(args.run_dir)))
+    if not args.no_summary:
+        print(_summary(Path(args.run_dir)))
     return 0
 
 
@@ -169,22 +170,29 @@ def cmd_report(args) -> int:
 
 
 def cmd_run(args) -> int:
+    """Render, restore and report, each stage in its own process.
+
+    The stages hand over through the run directory's files anyway; a fresh
+    process per stage gives each its own memory, so the peak of the whole run
+    is that of its largest stage, not their sum of leftovers.
+    """
+    import subprocess
+
     from .scenario import load_scenario
-    from .simulate import simulate
 
     sc = load_scenario(args.scenario, overrides=_parse_set(args.set))
-    _validate_later_stages(sc)
+    _validate_later_stages(sc)  # every key checked before anything starts
     out = Path(args.out) if args.out else Path("runs") / sc.name
-    res = simulate(sc, out, progress=not args.quiet, force=args.force)
-    _say_replaced(out, res.replaced)
-    print(f"rendered {out} in {res.timings['total_s']:.1f} s")
-    from restore.pipeline import restore_run
-
-    rres = restore_run(out, progress=not args.quiet)
-    if not args.quiet:
-        print(rres.summary())
-    path = _report(out, None, quiet=args.quiet)
-    print(_summary(out, report_path=path))
+    sets = [x for item in (args.set or []) for x in ("--set", item)]
+    quiet = ["--quiet"] if args.quiet else []
+    stages = [["render", str(args.scenario), "--out", str(out), *sets, *quiet, *(["--force"] if args.force else [])],
+              ["restore", str(out), "--no-summary", *quiet],
+              ["report", str(out), *quiet]]
+    for argv in stages:
+        rc = subprocess.run([sys.executable, "-m", "simsat.cli", *argv]).returncode
+        if rc != 0:
+            return rc
+    print(_summary(out, report_path=out / "report" / "index.html"))
     return 0
 
 
@@ -247,6 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a [restoration] key, e.g. --set method=wiener or --set integration.k=1e-3")
     s.add_argument("--quiet", action="store_true", help=quiet_help)
+    s.add_argument("--no-summary", action="store_true", help=argparse.SUPPRESS)  # used by `simsat run`
     s.set_defaults(func=cmd_restore)
 
     s = sub.add_parser("report", help="write the HTML report of a run")

@@ -246,3 +246,16 @@ def test_os_refusals_are_one_line_naming_the_path(capsys, tmp_path):
     rc, out, err = _cli(capsys, "figures", "--out", str(f), "--no-monte-carlo")
     assert rc == 2 and str(f) in err and "in the way" in err
     assert f.read_text() == "x"
+
+
+def test_run_chains_the_stages_in_their_own_processes_and_ends_with_the_result(capfd, tmp_path):
+    d = tmp_path / "whole"
+    rc = cli.main(["run", "tiny", "--out", str(d), *SMALL])
+    out, err = capfd.readouterr()
+    assert rc == 0, err
+    assert "Traceback" not in err and "internal error" not in err
+    assert (d / "report" / "index.html").is_file() and (d / "restoration.nc").is_file()
+    assert out.count("restored error") == 1 and "requirement" in out and str(d / "report" / "index.html") in out
+    rc = cli.main(["run", "tiny", "--out", str(d), "--set", "acquisition.lines=-3", "--quiet"])
+    out, err = capfd.readouterr()
+    assert rc == 2 and "acquisition.lines" in err  # refused before any stage starts
