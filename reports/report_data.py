@@ -200,18 +200,6 @@ def read_product_light(path) -> tuple:
     return prod, shapes
 
 
-def _open_optional(path: Path, notes: list, what: str):
-    import xarray as xr
-
-    if not path.exists():
-        return None
-    try:
-        return xr.load_dataset(path, engine="netcdf4")
-    except Exception as e:  # corrupted file: report without it, say so
-        notes.append(f"{path.name} could not be read ({type(e).__name__}: {e}); {what} left out.")
-        return None
-
-
 def _read_truth_checked(path: Path, product_time: np.ndarray):
     """``truth.nc`` with its axes present, finite and covering the product's lines."""
     import xarray as xr

@@ -71,7 +71,6 @@ def correct_band_block(img, rl: np.ndarray, rc: np.ndarray, *, n_lines: int | No
         read, total = img, int(n_lines)
     else:
         read, total = (lambda s: img[s]), img.shape[0]
-    n_cols = rl.shape[1] if rl.ndim == 2 else None
     finite_l = rl[np.isfinite(rl)]
     if finite_l.size == 0:
         return np.full(rl.shape, np.nan, np.float32)

@@ -61,6 +61,8 @@ References
 """
 from __future__ import annotations
 
+import dataclasses
+
 import enum
 import threading
 from dataclasses import dataclass, fields
@@ -806,7 +808,6 @@ def match_points_in_blocks(read_a, read_b, n_lines: tuple, lines_a, cols_a, pred
     n = la.size
     margin = support_margin(window=options.get("window", (3, 31)), search=options.get("search", (2, 2)),
                             order=options.get("order", 4))[0] + 8
-    fields = {k: None for k in ("line_b", "col_b", "quality", "valid", "flags", "std_line", "std_col")}
     parts = []
     idx_all = np.arange(n)
     for a in range(0, int(n_lines[0]), block_lines):
@@ -824,7 +825,7 @@ def match_points_in_blocks(read_a, read_b, n_lines: tuple, lines_a, cols_a, pred
                          **options)
         parts.append((sel, m, b0))
     out = {}
-    for k in fields:
+    for k in (f.name for f in dataclasses.fields(MatchResult)):
         proto = getattr(parts[0][1], k) if parts else np.zeros(0)
         arr = np.zeros(n, dtype=np.asarray(proto).dtype)
         if arr.dtype.kind == "f":

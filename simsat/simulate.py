@@ -1,7 +1,6 @@
 """Scenario → rendered multi-band product + exact truth (the `simsat render` command)."""
 from __future__ import annotations
 
-import os
 import platform as _pyplatform
 import shutil
 import math
@@ -142,7 +141,6 @@ def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> Simulati
     timings["world_s"] = _time.perf_counter() - t
 
     inst = sc.instrument
-    lines = sc.acquisition.lines
     t_lines = sc.line_times
 
     t = _time.perf_counter()

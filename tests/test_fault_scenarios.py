@@ -20,8 +20,6 @@ The default run takes a deterministic sample; ``-m slow`` runs them all.
 """
 from __future__ import annotations
 
-import copy
-import math
 import time
 
 import pytest
