@@ -31,13 +31,16 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from reports.metrics import error_stats, truth_at
+from reports.metrics import error_stats, misregistration_floor, truth_at
+from restore.integration.methods import integration_method
+from restore.restoration_io import check_restoration, open_restoration, result_from_dataset
+from simsat.product import ProductError, read_product
 
 __all__ = [
     "AXES", "RunData", "load_run", "read_product_light", "get_integrator", "scenario_summary", "restored_axes",
     "attitude_table", "headline", "minmax_decimate", "zoom_window", "longest_finite_run", "welch_settings",
     "spectra", "integration_probe", "measured_transfer", "analytic_chain_gain", "analytic_joint_gain",
-    "wiener_k", "true_differentials", "line_lags", "error_budget", "freeze_integration", "frozen_chain_gain", "probe_window_gain",
+    "regularisation_k", "true_differentials", "line_lags", "integration_record", "error_budget", "frozen_chain_gain", "probe_window_gain",
     "axis_integration", "measured_differentials", "match_density", "misregistration_rows",
     "scene_geometry", "pair_file_tag",
 ]
@@ -63,6 +66,9 @@ class RunData:
         ``{band: (lines, columns)}``.
     restoration : xarray.Dataset or None
         ``restoration.nc`` (None when the run was not restored).
+    result : restore.result.RestorationResult or None
+        The same file read back by :func:`restore.restoration_io.result_from_dataset`:
+        what the pipeline did (pairs, τ′, per-axis integration records), never re-derived here.
     truth : xarray.Dataset or None
         ``truth.nc`` (None for a real product).
     run_info : dict
@@ -79,6 +85,7 @@ class RunData:
     run_info: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     has_corrected: bool = False
+    result: object = None
     _cache: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -233,16 +240,14 @@ def load_run(run_dir) -> RunData:
     simsat.product.ProductError
         When ``product.nc`` is missing or malformed (the only required file).
     """
-    from restore.restoration_io import check_restoration, open_restoration
-    from simsat.product import ProductError
-
     run_dir = Path(run_dir)
     notes: list = []
     product, shapes = read_product_light(run_dir)
-    rest = None
+    rest = result = None
     if (run_dir / "restoration.nc").exists():
         rest = open_restoration(run_dir / "restoration.nc")
         check_restoration(rest, run_dir / "restoration.nc", product_time=product.time)
+        result = result_from_dataset(rest, run_dir / "restoration.nc")
     else:
         notes.append("No restoration.nc in the run: run `simsat restore RUN_DIR` for the restored attitude; "
                      "only the product (and truth) are shown.")
@@ -262,7 +267,7 @@ def load_run(run_dir) -> RunData:
             raise ProductError(f"{run_dir / 'run.json'}: must hold a JSON object (simsat's run record), "
                                f"got {type(info).__name__}")
     return RunData(run_dir=run_dir, product=product, image_shapes=shapes, restoration=rest, truth=truth,
-                   run_info=info, notes=notes, has_corrected=(run_dir / "corrected.nc").exists())
+                   run_info=info, notes=notes, has_corrected=(run_dir / "corrected.nc").exists(), result=result)
 
 
 def get_integrator(integrator: Callable | None = None) -> tuple:
@@ -653,58 +658,6 @@ def _options_for_pairs(options: dict, idx: Sequence[int], n_pairs: int) -> dict:
     return out
 
 
-def freeze_integration(integrate: Callable, diffs, taus, te: float, *, method: str | None,
-                       options: dict | None = None) -> dict:
-    """Run the integration on the measured differentials and freeze what it adapted to the data.
-
-    ``restore.integration``'s ``wiener`` methods estimate their signal prior
-    (PSD) and the noise level from the differentials: the filter actually
-    applied depends on the data. Re-running it on other inputs (a probe, noise
-    alone, true differentials) would re-estimate them and measure another
-    filter. When the method reports its estimates (``return_details=True`` →
-    ``.spectrum`` with ``freq``, ``psd``, ``noise_std``), they are passed back
-    as options (``psd=(freq, psd)``, ``noise_std``), which makes it the fixed,
-    linear filter used on the measured data.
-
-    Returns
-    -------
-    dict
-        ``options`` (frozen, or as given), ``theta`` (integrate(diffs), or
-        None), ``frozen`` (bool), ``spectrum`` ({freq, psd, noise_std} or
-        None), ``error`` (str).
-    """
-    opts = dict(options or {})
-    out = {"options": opts, "theta": None, "frozen": False, "spectrum": None, "error": ""}
-    if "psd" in opts:  # already fixed by the user
-        return out
-    try:
-        res = integrate(list(diffs), list(taus), te, method=method, **opts, return_details=True)
-    except TypeError:  # the method takes no return_details: not adaptive as far as we can tell
-        try:
-            out["theta"] = np.asarray(integrate(list(diffs), list(taus), te, method=method, **opts), dtype=np.float64)
-        except Exception as e:
-            out["error"] = f"{type(e).__name__}: {e}"
-        return out
-    except Exception as e:
-        out["error"] = f"{type(e).__name__}: {e}"
-        return out
-    spec = getattr(res, "spectrum", None)
-    if isinstance(res, np.ndarray) or spec is None:
-        out["theta"] = np.asarray(getattr(res, "theta", res), dtype=np.float64)
-        return out
-    out["theta"] = np.asarray(res.theta, dtype=np.float64)
-    try:
-        freq = np.asarray(spec.freq, dtype=np.float64)
-        psd = np.asarray(spec.psd, dtype=np.float64)
-        sigma = np.asarray(spec.noise_std, dtype=np.float64)
-    except AttributeError:
-        return out
-    out["options"] = {**opts, "psd": (freq, psd), "noise_std": sigma}
-    out["frozen"] = True
-    out["spectrum"] = {"freq": freq, "psd": psd, "noise_std": sigma}
-    return out
-
-
 def frozen_chain_gain(freq_hz, taus: Sequence[float], spectrum: dict, te: float) -> np.ndarray:
     """Analytic chain gain of the multi-pair Wiener filter with a frozen prior.
 
@@ -905,13 +858,16 @@ def analytic_joint_gain(freq_hz, taus: Sequence[float], k: float) -> np.ndarray:
     return s / (s + k)
 
 
-def wiener_k(options: dict) -> float | None:
-    """The Wiener regularisation k in integration options, if one is given."""
-    for key in ("k", "wiener_k", "regularization", "regularisation", "k_reg"):
-        v = (options or {}).get(key)
-        if isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0:
-            return float(v)
-    return None
+def regularisation_k(method: str | None, options: dict) -> float | None:
+    """The fixed regularisation k of a method that is the stationary filter Σ|G|²/(Σ|G|² + k), if it has one."""
+    try:
+        key = integration_method(method or None).gain_option
+    except ValueError:
+        return None
+    v = (options or {}).get(key) if key else None
+    if key and v is None:
+        v = integration_method(method or None).options().get(key)
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0 else None
 
 
 # =============================================================================
@@ -926,45 +882,33 @@ def _truth_interpolant(truth, axis: str):
     return CubicSpline(t, np.asarray(truth[axis].values, dtype=np.float64), extrapolate=False)
 
 
-def _highpass(d, te, settings):
-    hp = float(settings.get("highpass_hz") or 0.0)
-    if hp <= 0:
-        return d
-    from restore.synthesis import highpass_nan  # same filter as the pipeline
+def integration_record(run: RunData, axis: str):
+    """The pipeline's record of the last integration of ``axis`` (:class:`restore.result.IntegrationRecord`).
 
-    return highpass_nan(d, dt=te, cutoff_hz=hp)
-
-
-def line_lags(run: RunData) -> np.ndarray | None:
-    """Extra delay of each pair at each line of band A [lines] (time synchronisation), from the matches.
-
-    Band B sees the ground of line ``l`` of A at ``t + τ + λ(l)·Te``, where
-    ``λ`` is the line residual (measured − predicted with knowledge) of the
-    inliers, averaged per line, interpolated over lines without inliers; the
-    measured differentials are ``δ(t + τ + λ Te) − δ(t)`` (pitch jitter changes
-    the actual delay). Returns ``(pair, line)`` or None without matches.
+    None without restoration, for an axis that was not restored, or when the
+    record does not cover every pair of the restoration.
     """
-    rest = run.restoration
-    need = ("match_pair", "match_line_a", "match_meas_line_b", "match_pred_line_b", "match_inlier")
-    if rest is None or any(k not in rest for k in need):
+    if run.result is None:
         return None
-    n = run.time.size
-    pair = np.asarray(rest["match_pair"].values).astype(np.int64)
-    la = np.rint(np.asarray(rest["match_line_a"].values, dtype=np.float64))
-    dl = np.asarray(rest["match_meas_line_b"].values, dtype=np.float64) - \
-        np.asarray(rest["match_pred_line_b"].values, dtype=np.float64)
-    inl = np.asarray(rest["match_inlier"].values).astype(bool) & np.isfinite(dl) & (la >= 0) & (la < n)
-    out = np.zeros((len(run.pairs), n))
-    for j in range(len(run.pairs)):
-        s = inl & (pair == j)
-        li = la[s].astype(np.int64)
-        c = np.bincount(li, minlength=n)
-        m = c > 0
-        if not m.any():
-            continue
-        lag = np.bincount(li, dl[s], minlength=n)[m] / c[m]
-        out[j] = np.interp(np.arange(n), np.flatnonzero(m), lag)
-    return out
+    rec = run.result.integration.get(axis)
+    if rec is None or list(rec.pairs) != run.pairs:
+        return None
+    return rec
+
+
+def line_lags(run: RunData, axis: str | None = None) -> np.ndarray | None:
+    """Extra delay of each pair at each line of band A [lines] (time synchronisation), as the pipeline used it.
+
+    Band B sees the ground of line ``l`` of A at ``t + τ + λ(l)·Te`` (pitch
+    jitter changes the actual delay): the measured differentials are
+    ``δ(t + τ + λ Te) − δ(t)``. Read from the integration record of ``axis``
+    (default: the first restored axis); (pair, line) or None.
+    """
+    axes = restored_axes(run)
+    rec = integration_record(run, axis or (axes[0] if axes else "roll"))
+    if rec is None:
+        return None
+    return rec.lags_s / rec.line_period_s
 
 
 def true_differentials(run: RunData, axis: str, *, previous_estimate=None, lags=None) -> tuple:
@@ -1000,7 +944,7 @@ def true_differentials(run: RunData, axis: str, *, previous_estimate=None, lags=
     def delta(tt):
         return ftrue(tt) - kn_series.at(tt, outside="nan")[k_idx]
 
-    meas = np.asarray(run.restoration[f"diff_{axis}"].values, dtype=np.float64)
+    meas = np.asarray(measured_differentials(run, axis), dtype=np.float64)
     base = np.full(meas.shape, np.nan)
     slope = np.zeros(meas.shape)
     d0 = delta(t)
@@ -1031,45 +975,35 @@ def true_differentials(run: RunData, axis: str, *, previous_estimate=None, lags=
     return dtrue, prev
 
 
-def _line_weights(run: RunData):
-    """The pipeline's relative weight of each pair's line (matched points, at least the minimum), or None."""
-    rest = run.restoration
-    if rest is None or "diff_points" not in rest:
-        return None
-    pts = np.asarray(rest["diff_points"].values, dtype=np.float64)
-    floor = float(run.settings.get("min_points_per_line") or 3)
-    return [np.where(p >= floor, p, floor) for p in pts]
-
-
 def measured_differentials(run: RunData, axis: str) -> list:
-    """The run's differentials of ``axis`` per pair, as integrated (the high-pass applies to the estimate)."""
-    meas = np.asarray(run.restoration[f"diff_{axis}"].values, dtype=np.float64)
-    return [m for m in meas]
+    """The run's differentials of ``axis`` per pair as the pipeline integrated them (raw synthesis if unrecorded)."""
+    rec = integration_record(run, axis)
+    if rec is not None:
+        return [d for d in rec.diffs]
+    return [m for m in np.asarray(run.restoration[f"diff_{axis}"].values, dtype=np.float64)]
 
 
-def axis_integration(run: RunData, axis: str, integrate: Callable) -> dict:
-    """:func:`freeze_integration` of the run's method on the measured differentials of ``axis`` (cached)."""
-    key = ("freeze", axis, id(integrate))
-    if key not in run._cache:
-        method = str(run.restoration.attrs.get("method", "")) or None
-        opts = dict(run.settings.get("integration_options") or {})
-        w = _line_weights(run)
-        if (method or "wiener") == "wiener" and w is not None and "weights" not in opts:
-            opts["weights"] = w  # as the pipeline: lines weigh by their matched points
-        fz = freeze_integration(integrate, measured_differentials(run, axis), run.taus,
-                                run.line_period_s, method=method, options=opts)
-        if fz["theta"] is not None:  # as the pipeline: the high-pass applies to the estimate
-            fz["theta"] = _highpass(fz["theta"], run.line_period_s, run.settings)
-        run._cache[key] = fz
-    return run._cache[key]
+def axis_integration(run: RunData, axis: str) -> dict:
+    """The integration the pipeline applied to ``axis``, from its record in ``restoration.nc``.
 
-
-def _integrate_axis(integrate, diffs, run: RunData, method, options):
-    """Integrate like the pipeline: the differentials as they are, the high-pass of the settings on the result."""
-    te = run.line_period_s
-    d = [np.asarray(x, dtype=np.float64) for x in diffs]
-    est = np.asarray(integrate(d, list(run.taus), te, method=method, **options), dtype=np.float64)
-    return _highpass(est, te, run.settings)
+    Returns
+    -------
+    dict
+        ``options`` (the method's options with a data-estimated prior frozen:
+        re-running with them applies the same, fixed filter), ``theta`` (the
+        last integration's output), ``frozen`` (bool), ``spectrum`` ({freq,
+        psd, noise_std} or None), ``record`` (or None), ``error`` (str).
+    """
+    rec = integration_record(run, axis)
+    if rec is None:
+        return {"options": dict(run.settings.get("integration_options") or {}), "theta": None, "frozen": False,
+                "spectrum": None, "record": None,
+                "error": "restoration.nc has no integration record for this axis (written by an older simsat: "
+                         "run `simsat restore` again)"}
+    sp = rec.spectrum
+    return {"options": rec.frozen_options(), "theta": rec.increment, "frozen": sp is not None,
+            "spectrum": None if sp is None else {"freq": sp.freq, "psd": sp.psd, "noise_std": sp.noise_std},
+            "record": rec, "error": ""}
 
 
 def _stats_row(component: str, axis: str, e, ifov: float, note: str = "") -> dict:
@@ -1117,13 +1051,13 @@ def error_budget(run: RunData, *, integrate: Callable | None = None, seed: int =
       noise does not explain: √(measurement² − noise²), per figure;
     * **total** — restored − true (the headline).
 
-    The integration is re-run with the run's method and options; a method that
-    adapts to its data (``wiener``: PSD prior and noise level) is frozen on the
-    measured differentials first (:func:`freeze_integration`), so that every
-    component goes through the filter that was actually applied. With several
-    iterations the last one is analysed (see :func:`true_differentials`); the
-    previous estimate is recovered as correction − integrate(last
-    differentials).
+    Every re-run goes through the pipeline's own integration step with the
+    inputs ``restoration.nc`` recorded (:meth:`restore.result.IntegrationRecord.rerun`:
+    time synchronisation with the recorded per-line lags, weights, the
+    method's options, the prior a data-adaptive method estimated, frozen, and
+    the high-pass), so every component goes through the filter that was
+    actually applied. With several iterations the last one is analysed,
+    starting from the recorded previous estimate (see :func:`true_differentials`).
 
     Returns
     -------
@@ -1145,7 +1079,6 @@ def error_budget(run: RunData, *, integrate: Callable | None = None, seed: int =
                 "seconds": 0.0}
     ifov = run.ifov
     att = attitude_table(run)
-    method = str(rest.attrs.get("method", "")) or None
     iterations = int(run.settings.get("iterations") or 1)
     have_truth = run.truth is not None
     axes = restored_axes(run)
@@ -1163,39 +1096,27 @@ def error_budget(run: RunData, *, integrate: Callable | None = None, seed: int =
     rng = np.random.default_rng(seed)
     for a in axes:
         mask = np.isfinite(att[f"restored_{a}"])
-        meas = np.asarray(rest[f"diff_{a}"].values, dtype=np.float64)
+        meas = np.asarray(measured_differentials(run, a), dtype=np.float64)
         sig = np.asarray(rest[f"diff_sigma_{a}"].values, dtype=np.float64) if f"diff_sigma_{a}" in rest else None
         ser: dict = {}
         if have_truth:
             rows.append(_stats_row("uncorrected knowledge", a, np.where(mask, att[f"knowledge_{a}"] - att[f"true_{a}"],
                                                                         np.nan), ifov))
-        fz = None
-        opts = dict(run.settings.get("integration_options") or {})
-        if integrate is not None:
-            fz = axis_integration(run, a, integrate)
-            if fz["error"]:
-                notes.append(f"{a}: re-running the integration failed ({fz['error']}); budget at the differential "
-                             "level only")
-                fz = None
-            else:
-                opts = fz["options"]
-        prev = None
-        if iterations > 1:
-            if fz is not None and fz["theta"] is not None:
-                prev = np.where(np.isfinite(fz["theta"]), att[f"correction_{a}"] - fz["theta"], np.nan)
-            else:
-                prev = att[f"correction_{a}"]
-                notes.append(f"{a}: {iterations} iterations and no integrator — the previous iterations' estimate "
-                             "is approximated by the final correction (differential-level figures only)")
-        elif fz is not None and fz["theta"] is not None:
-            # the re-run must reproduce the restoration's correction (one iteration)
-            c = _centred(np.where(mask, att[f"correction_{a}"], np.nan))
-            r = _centred(np.where(mask, fz["theta"], np.nan))
-            d = c - r
-            d = d[np.isfinite(d)]
+        fz = axis_integration(run, a)
+        rec = fz["record"]
+        if fz["error"]:
+            notes.append(f"{a}: {fz['error']}; budget at the differential level only")
+        prev = rec.previous if rec is not None and np.any(rec.previous) else None
+        if integrate is None or rec is None:
+            rec = None
+        else:
+            # the recorded inputs must reproduce what the pipeline's integration returned
+            c = _centred(np.where(mask, rec.increment, np.nan))
+            r = _centred(np.where(mask, rec.rerun(), np.nan))
+            d = (c - r)[np.isfinite(c - r)]
             cc = c[np.isfinite(c)]
             if d.size and cc.size and np.sqrt(np.mean(d ** 2)) > 0.02 * np.sqrt(np.mean(cc ** 2)):
-                notes.append(f"{a}: re-running the integration differs from the restoration's correction by "
+                notes.append(f"{a}: re-running the integration differs from the restoration's by "
                              f"{np.sqrt(np.mean(d ** 2)) / np.sqrt(np.mean(cc ** 2)) * 100:.0f} % RMS; the split "
                              "between measurement and integration is approximate")
         noise = None
@@ -1237,28 +1158,29 @@ def error_budget(run: RunData, *, integrate: Callable | None = None, seed: int =
                 if k.endswith("_urad"):
                     row[k.replace("_urad", "_px")] = row[k] * 1e-6 / ifov
             drows.append(row)
-        if fz is None or not have_truth:
+        if rec is None or not have_truth:
             if have_truth:
                 rows.append(_stats_row("total (restored − true)", a, att[f"restored_{a}"] - att[f"true_{a}"], ifov))
-            elif fz is not None and noise is not None:
+            elif rec is not None and noise is not None:
                 # no truth: integrate(measured + σ·noise) − integrate(measured)
-                th_meas = fz["theta"] if fz["theta"] is not None else \
-                    _integrate_axis(integrate, list(meas), run, method, opts)
-                th_noisy = _integrate_axis(integrate, list(meas + noise), run, method, opts)
+                th_meas = rec.rerun()
+                th_noisy = rec.rerun(meas + noise)
                 en = np.where(mask, th_noisy - th_meas, np.nan)
                 rows.append(_stats_row("matching noise", a, en, ifov,
                                        "integrate(measured + σ·noise) − integrate(measured), 1 draw"))
                 ser["matching noise"] = en
             series[a] = ser
             continue
-        th_true = _integrate_axis(integrate, list(dtrue), run, method, opts)
+        # perfect differentials as the images saw them (at t + τ + λ), through the same integration
+        dperfect = dlag if dlag is not None else dtrue
+        th_true = rec.rerun(dperfect)
         remaining = att[f"delta_{a}"] - (prev_used if prev_used is not None else 0.0)
         eint = _centred(np.where(mask, th_true - remaining, np.nan))
         total = _centred(att[f"restored_{a}"] - att[f"true_{a}"])
         emeas = total - eint
         r_noise = None
         if noise is not None:
-            th_noisy = _integrate_axis(integrate, list(dtrue + noise), run, method, opts)
+            th_noisy = rec.rerun(dperfect + noise)
             en = np.where(mask, th_noisy - th_true, np.nan)
             r_noise = _stats_row("matching noise", a, en, ifov, "integrate(true + σ·noise) − integrate(true), 1 draw")
             rows.append(r_noise)
@@ -1272,7 +1194,7 @@ def error_budget(run: RunData, *, integrate: Callable | None = None, seed: int =
         ser.update({"measurement": emeas, "integration": eint, "total": total})
         series[a] = ser
     if integrate is None:
-        notes.append("attitude-domain propagation (matching noise, model, integration) needs the integrator; "
+        notes.append("attitude-domain propagation (matching noise, model, integration) needs re-running the integration; "
                      "only the differential-level figures are given")
     if not have_truth:
         notes.append("no truth: only the matching noise can be budgeted")
@@ -1412,34 +1334,10 @@ def misregistration_with_true_attitude(run: RunData) -> dict:
         return {}
     if "true_attitude_floor" in run._cache:
         return run._cache["true_attitude_floor"]
-    from types import SimpleNamespace
-
-    from restore.pipeline import RestorationSettings
-    from simsat.product import ProductError, read_product
-
-    from .metrics import misregistration_floor
-
     out = {}
     try:
         product = read_product(run.run_dir)
-        d = RestorationSettings()
-        st = run.settings
-        settings = SimpleNamespace(window=tuple(st.get("window", d.window)), search=tuple(st.get("search", d.search)),
-                                   match_method=st.get("match_method", d.match_method),
-                                   min_quality=float(st.get("min_quality", d.min_quality)),
-                                   correction_column_step=int(st.get("correction_column_step",
-                                                                     d.correction_column_step)))
-        mp = np.asarray(rest["match_pair"].values)  # index into run.pairs, as in match_density
-        pairs = []
-        for j, name in enumerate(run.pairs):
-            m = mp == j
-            ahead, behind = name.split("/")
-            v = lambda k: np.asarray(rest[k].values, dtype=np.float64)[m]  # noqa: E731
-            pairs.append(SimpleNamespace(name=name, ahead=ahead, behind=behind, line_a=v("match_line_a"),
-                                         col_a=v("match_col_a"), meas_line_b=v("match_meas_line_b"),
-                                         meas_col_b=v("match_meas_col_b"),
-                                         valid=np.asarray(rest["match_valid"].values, bool)[m],
-                                         std_line=None, std_col=None))
+        pairs, settings = run.result.pairs, run.result.settings
         out = misregistration_floor(product, run.truth, pairs, settings)
     except (ProductError, KeyError, ValueError, OSError) as ex:
         run.notes.append(f"misregistration with the true attitude not computed: {ex}")

@@ -338,7 +338,7 @@ def _transfer_section(pg: _Page, run: D.RunData, sc: dict, f_max: float, integra
     if integrate is not None:
         shared = None
         for a in axes:
-            fz = D.axis_integration(run, a, integrate)
+            fz = D.axis_integration(run, a)
             if fz["error"]:
                 pg.note(_e(f"{a}: re-running the integration failed: {fz['error']}"))
                 continue
@@ -370,7 +370,7 @@ def _transfer_section(pg: _Page, run: D.RunData, sc: dict, f_max: float, integra
                     gaps_txt.append(f"{a}: median {np.median(dev):.3f}, largest {np.max(dev):.2f}")
     else:
         pg.note(_e(f"The integration cannot be re-run ({why_not}); only an analytic Wiener reference is drawn."))
-    k = D.wiener_k(opts)
+    k = D.regularisation_k(method or None, opts)
     for a in axes:
         if a in analytic or (a in probes and k is None):
             continue

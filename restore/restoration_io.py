@@ -1,4 +1,8 @@
-"""Checks of ``restoration.nc`` as read back by its consumers (the report, studies).
+"""``restoration.nc``: its writer, its reader, and the checks of what is read back.
+
+:func:`restoration_dataset` writes a :class:`~restore.result.RestorationResult`;
+:func:`read_restoration` reads it back into the same type, so a consumer (the
+report, a study) works from what the pipeline did, never re-deriving it.
 
 A restoration that cannot belong to its product (another length, other line
 times), that lost variables (truncated, edited), or that holds nothing
@@ -11,12 +15,17 @@ import json
 from pathlib import Path
 
 import numpy as np
+import xarray as xr
 
 from simsat.product import ProductError
 
-__all__ = ["open_restoration", "check_restoration", "REQUIRED_VARIABLES", "REQUIRED_ATTRS"]
+from .axis_integration import PriorSpectrum
+from .result import IntegrationRecord, PairData, RestorationResult
+from .settings import RestorationSettings, settings_dict
+from .synthesis import AXES
 
-AXES = ("roll", "pitch", "yaw")
+__all__ = ["open_restoration", "check_restoration", "restoration_dataset", "read_restoration",
+           "result_from_dataset", "REQUIRED_VARIABLES", "REQUIRED_ATTRS"]
 REQUIRED_VARIABLES = tuple(f"{p}{a}" for a in AXES for p in ("", "knowledge_", "correction_", "diff_")) + (
     "time", "pair", "tau_s")
 REQUIRED_ATTRS = ("pixel_ifov_rad", "settings", "method")
@@ -30,8 +39,6 @@ def open_restoration(path: str | Path):
     ProductError
         The file is not readable NetCDF (truncated, corrupt).
     """
-    import xarray as xr
-
     p = Path(path)
     try:
         return xr.load_dataset(p, engine="netcdf4")
@@ -109,3 +116,196 @@ def check_restoration(ds, path: str | Path, *, product_time: np.ndarray) -> list
         if shape != (n_pairs, t.size):
             raise ProductError(f"{p}: variable 'diff_{a}' has shape {shape}, expected ({n_pairs} pairs, {t.size} lines)")
     return axes
+
+
+# --------------------------------------------------------------------------- writer
+_MATCH_FIELDS = ("line_a", "col_a", "meas_line_b", "meas_col_b", "pred_line_b", "pred_col_b", "quality", "std_line",
+                 "std_col")
+
+
+def _match_variables(pairs: list) -> dict:
+    """The matches of every pair, concatenated along ``match`` (``match_pair`` says whose)."""
+    data = {}
+    cols = {k: [] for k in _MATCH_FIELDS}
+    mp, valid, inl = [], [], []
+    for i, p in enumerate(pairs):
+        mp.append(np.full(p.valid.size, i, dtype=np.int16))
+        for k in cols:
+            v = getattr(p, k)
+            cols[k].append(np.full(p.valid.size, np.nan) if v is None else np.asarray(v, dtype=np.float64))
+        valid.append(p.valid)
+        inl.append(p.inlier if p.inlier is not None else np.zeros(p.valid.size, bool))
+    data["match_pair"] = ("match", np.concatenate(mp) if mp else np.zeros(0, np.int16))
+    for k, v in cols.items():
+        attrs = ({"units": "1", "long_name": "normalised correlation of the match"} if k == "quality"
+                 else {"units": "px"})
+        data[f"match_{k}"] = ("match", np.concatenate(v) if v else np.zeros(0), attrs)
+    data["match_valid"] = ("match", np.concatenate(valid).astype(np.int8))
+    data["match_inlier"] = ("match", np.concatenate(inl).astype(np.int8))
+    data["match_residual_line"] = ("match", data["match_meas_line_b"][1] - data["match_pred_line_b"][1],
+                                   {"units": "px"})
+    data["match_residual_col"] = ("match", data["match_meas_col_b"][1] - data["match_pred_col_b"][1], {"units": "px"})
+    return data
+
+
+def _integration_variables(res: RestorationResult) -> tuple[dict, dict]:
+    """Per restored axis, the inputs and output of its last integration (over all pairs; NaN: pair not used)."""
+    data, coords = {}, {}
+    names = [p.name for p in res.pairs]
+    n = res.time.size
+    for a, rec in res.integration.items():
+        idx = [names.index(nm) for nm in rec.pairs]
+
+        def full(x, fill=np.nan):
+            out = np.full((len(names), n), fill)
+            out[idx] = x
+            return out
+        data[f"integrated_diff_{a}"] = (("pair", "time"), full(rec.diffs), {
+            "units": "rad", "long_name": f"{a} differentials as integrated (gaps dropped / filled, window compensated)"})
+        data[f"integrated_sigma_{a}"] = (("pair", "time"), full(rec.sigmas), {"units": "rad"})
+        data[f"line_lag_{a}"] = (("pair", "time"), full(rec.lags_s), {
+            "units": "s", "long_name": "extra delay of the pair at each line (time synchronisation)"})
+        data[f"line_weight_{a}"] = (("pair", "time"), full(rec.weights), {"long_name": "relative weight of the line"})
+        tau = np.full(len(names), np.nan)
+        tau[idx] = rec.taus
+        data[f"integrated_tau_{a}"] = ("pair", tau, {"units": "s", "long_name": "actual delay τ′ integrated with"})
+        data[f"increment_{a}"] = ("time", rec.increment, {"units": "rad", "long_name": "last integration's output"})
+        data[f"previous_estimate_{a}"] = ("time", rec.previous, {"units": "rad"})
+        if rec.spectrum is not None:
+            coords[f"prior_freq_{a}"] = (f"prior_freq_{a}", rec.spectrum.freq, {"units": "Hz"})
+            data[f"prior_psd_{a}"] = (f"prior_freq_{a}", rec.spectrum.psd, {
+                "units": "rad2 s", "long_name": "PSD prior the method estimated from the data (two-sided)"})
+            nstd = np.full(len(names), np.nan)
+            nstd[idx] = rec.spectrum.noise_std
+            data[f"prior_noise_std_{a}"] = ("pair", nstd, {"units": "rad"})
+    return data, coords
+
+
+def restoration_dataset(res: RestorationResult) -> xr.Dataset:
+    """The ``restoration.nc`` dataset of a result (read back by :func:`read_restoration`)."""
+    data = {}
+    for a in AXES:
+        data[a] = ("time", res.restored[a], {"units": "rad", "long_name": f"restored line-of-sight {a}",
+                                             "coverage": res.coverage[a]})
+        data[f"knowledge_{a}"] = ("time", res.knowledge[a], {"units": "rad"})
+        data[f"correction_{a}"] = ("time", res.correction[a], {"units": "rad"})
+    names = [p.name for p in res.pairs]
+    for k, a in enumerate(AXES):
+        data[f"diff_{a}"] = (("pair", "time"), np.stack([p.synthesis.diff[:, k] for p in res.pairs]),
+                             {"units": "rad", "long_name": f"per-line {a} differential θ(t+τ)−θ(t) (remaining error)"})
+        data[f"diff_sigma_{a}"] = (("pair", "time"), np.stack([p.synthesis.sigma[:, k] for p in res.pairs]),
+                                   {"units": "rad", "long_name": "formal 1-sigma of the differential"})
+    w = np.stack([p.synthesis.n_points for p in res.pairs]).astype(np.int32)
+    data["diff_points"] = (("pair", "time"), w, {"long_name": "inlier matches per line (synthesis weight)"})
+    data["tau_s"] = ("pair", np.array([p.tau_s for p in res.pairs]), {"units": "s", "long_name": "actual delay τ′"})
+    data["nominal_tau_s"] = ("pair", np.array([p.nominal_tau_s if p.nominal_tau_s is not None else np.nan
+                                               for p in res.pairs]), {"units": "s"})
+    data["residual_rms_px"] = ("pair", np.array([p.residual_rms_px for p in res.pairs]), {"units": "px"})
+    data.update(_match_variables(res.pairs))
+    integ, coords = _integration_variables(res)
+    data.update(integ)
+    attrs = {"title": "simsat restoration", "method": res.method, "pixel_ifov_rad": res.pixel_ifov_rad,
+             "pairs": ",".join(names), "settings": json.dumps(settings_dict(res.settings), sort_keys=True),
+             "timings": json.dumps(res.timings, sort_keys=True),
+             "misregistration": json.dumps(res.misregistration, sort_keys=True),
+             "anchored_on_star_tracker": int(res.anchored),
+             "integration": json.dumps({a: {"pairs": rec.pairs, "method": rec.method, "options": rec.options,
+                                            "highpass_hz": rec.highpass_hz, "line_period_s": rec.line_period_s}
+                                        for a, rec in res.integration.items()}, sort_keys=True)}
+    for a in AXES:
+        attrs[f"coverage_{a}"] = res.coverage[a]
+    coords.update({"time": ("time", res.time, {"units": "s"}), "pair": ("pair", np.array(names))})
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+# --------------------------------------------------------------------------- reader
+def _values(ds, name, dtype=np.float64):
+    return np.asarray(ds[name].values, dtype=dtype) if name in ds.variables else None
+
+
+def _pairs_from(ds) -> list[PairData]:
+    names = [str(x) for x in np.atleast_1d(ds["pair"].values)]
+    mp = _values(ds, "match_pair", np.int64)
+    out = []
+    for j, name in enumerate(names):
+        ahead, behind = name.split("/")
+        sel = mp == j if mp is not None else np.zeros(0, bool)
+        f = {k: (v[sel] if (v := _values(ds, f"match_{k}")) is not None else None) for k in _MATCH_FIELDS}
+        valid = (_values(ds, "match_valid", np.int8)[sel] != 0) if mp is not None else np.zeros(0, bool)
+        inl = (_values(ds, "match_inlier", np.int8)[sel] != 0) if "match_inlier" in ds.variables else None
+        nom = _values(ds, "nominal_tau_s")
+        rms = _values(ds, "residual_rms_px")
+        out.append(PairData(name=name, ahead=ahead, behind=behind, tau_s=float(ds["tau_s"].values[j]),
+                            line_a=f["line_a"], col_a=f["col_a"], meas_line_b=f["meas_line_b"],
+                            meas_col_b=f["meas_col_b"], quality=f["quality"], valid=valid,
+                            pred_line_b=f["pred_line_b"], pred_col_b=f["pred_col_b"], inlier=inl,
+                            std_line=f["std_line"], std_col=f["std_col"],
+                            nominal_tau_s=None if nom is None or not np.isfinite(nom[j]) else float(nom[j]),
+                            residual_rms_px=float("nan") if rms is None else float(rms[j])))
+    return out
+
+
+def _records_from(ds, info: dict) -> dict:
+    names = [str(x) for x in np.atleast_1d(ds["pair"].values)]
+    out = {}
+    for a, meta in info.items():
+        if f"integrated_diff_{a}" not in ds.variables:
+            continue
+        idx = [names.index(nm) for nm in meta["pairs"]]
+        spec = None
+        if f"prior_psd_{a}" in ds.variables:
+            spec = PriorSpectrum(np.asarray(ds[f"prior_freq_{a}"].values, dtype=np.float64),
+                                 _values(ds, f"prior_psd_{a}"), _values(ds, f"prior_noise_std_{a}")[idx])
+        out[a] = IntegrationRecord(
+            axis=a, pairs=list(meta["pairs"]), diffs=_values(ds, f"integrated_diff_{a}")[idx],
+            sigmas=_values(ds, f"integrated_sigma_{a}")[idx], taus=_values(ds, f"integrated_tau_{a}")[idx],
+            lags_s=_values(ds, f"line_lag_{a}")[idx], weights=_values(ds, f"line_weight_{a}")[idx],
+            line_period_s=float(meta["line_period_s"]), method=str(meta["method"]), options=dict(meta["options"]),
+            highpass_hz=float(meta["highpass_hz"]), spectrum=spec, increment=_values(ds, f"increment_{a}"),
+            previous=_values(ds, f"previous_estimate_{a}"))
+    return out
+
+
+def _settings_from(d: dict) -> RestorationSettings:
+    s = RestorationSettings()
+    for k, v in d.items():
+        if hasattr(s, k):
+            setattr(s, k, tuple(v) if k in ("window", "search", "pilot_search", "axes") else v)
+    return s
+
+
+def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult:
+    """A :class:`RestorationResult` from a ``restoration.nc`` dataset (see :func:`read_restoration`)."""
+    def js(key, default):
+        try:
+            return json.loads(str(ds.attrs.get(key, default)))
+        except json.JSONDecodeError:
+            raise ProductError(f"{path}: attribute {key!r} is not JSON; run `simsat restore` again") from None
+    return RestorationResult(
+        run_dir=Path(path).parent if path else None, time=_values(ds, "time"),
+        restored={a: _values(ds, a) for a in AXES}, knowledge={a: _values(ds, f"knowledge_{a}") for a in AXES},
+        correction={a: _values(ds, f"correction_{a}") for a in AXES},
+        coverage={a: float(ds.attrs.get(f"coverage_{a}", np.nan)) for a in AXES}, pairs=_pairs_from(ds),
+        timings=js("timings", "{}"), misregistration=js("misregistration", "{}"),
+        settings=_settings_from(js("settings", "{}")), pixel_ifov_rad=float(ds.attrs["pixel_ifov_rad"]),
+        method=str(ds.attrs["method"]), integration=_records_from(ds, js("integration", "{}")),
+        anchored=bool(int(ds.attrs.get("anchored_on_star_tracker", 0))), path=Path(path) if path else None)
+
+
+def read_restoration(path: str | Path, *, product_time: np.ndarray | None = None) -> RestorationResult:
+    """Read ``restoration.nc`` into a :class:`RestorationResult` (checked against ``product_time`` if given).
+
+    Per pair: matches, inliers, actual delay τ′, synthesis residual (the
+    per-line synthesis itself is in the file's ``diff_*`` variables, not in
+    ``PairData.synthesis``); per restored axis: the :class:`IntegrationRecord`
+    of its last integration.
+
+    Raises
+    ------
+    ProductError
+        Unreadable file, or (with ``product_time``) one that does not belong to its product.
+    """
+    ds = open_restoration(path)
+    if product_time is not None:
+        check_restoration(ds, path, product_time=product_time)
+    return result_from_dataset(ds, path)

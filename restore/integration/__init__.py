@@ -34,6 +34,9 @@ name           principle                                         function
 """
 from __future__ import annotations
 
+import difflib
+import math
+from collections.abc import Mapping
 from typing import Callable
 
 import numpy as np
@@ -42,70 +45,44 @@ from . import gaps, spectrum, transfer
 from .gaps import coverage, fill_from_differentials, interpolate_gaps, observed_mask
 from .transfer import (blind_frequencies, chain_gain, fused_chain_gain, fused_gains,
                        pair_transfer, wiener_gain)
+from .methods import DEFAULT_METHOD, INTEGRATION_METHODS, PIPELINE_OPTIONS, IntegrationMethod, integration_method
 from .wiener import integrate_inverse, integrate_wiener, integrate_wiener_fft
 
-__all__ = ["integrate", "METHODS", "DEFAULT_METHOD", "method_function", "method_options", "check_options",
+__all__ = ["integrate", "METHODS", "INTEGRATION_METHODS", "IntegrationMethod", "integration_method", "DEFAULT_METHOD", "method_function", "method_options", "check_options",
            "PIPELINE_OPTIONS", "coverage", "observed_mask",
            "fill_from_differentials", "interpolate_gaps", "pair_transfer", "wiener_gain",
            "chain_gain", "blind_frequencies", "fused_gains", "fused_chain_gain",
            "integrate_wiener", "integrate_wiener_fft", "integrate_inverse", "gaps", "spectrum",
            "transfer"]
 
-DEFAULT_METHOD = "wiener"
+class _MethodFunctions(Mapping):
+    """Method name → function, read-only view of :data:`INTEGRATION_METHODS` (imports on first use)."""
 
+    def __getitem__(self, name: str) -> Callable:
+        return INTEGRATION_METHODS[name].function
 
-def _lazy(module: str, name: str) -> Callable:
-    def call(*args, **kwargs):
-        import importlib
-        return getattr(importlib.import_module(f"{__name__}.{module}"), name)(*args, **kwargs)
-    call.__name__ = name
-    call.__doc__ = f"See :func:`restore.integration.{module}.{name}`."
-    return call
+    def __iter__(self):
+        return iter(INTEGRATION_METHODS)
+
+    def __len__(self) -> int:
+        return len(INTEGRATION_METHODS)
 
 
 #: method name -> function(diffs, taus, dt, **options) -> theta
-METHODS: dict[str, Callable] = {
-    "wiener": integrate_wiener,
-    "wiener_fft": integrate_wiener_fft,
-    "inverse": integrate_inverse,
-    "local": _lazy("local", "integrate_local"),
-    "harmonic": _lazy("harmonic", "integrate_harmonic"),
-    "kalman": _lazy("kalman", "integrate_kalman"),
-    "polynomial": _lazy("polynomial", "integrate_polynomial"),
-    "lsq": _lazy("lsq", "integrate_lsq"),
-}
-
-
-#: options the pipeline supplies itself from the data (not settable in a scenario)
-PIPELINE_OPTIONS = frozenset({"weights", "lags", "sigmas", "return_details"})
+METHODS: Mapping[str, Callable] = _MethodFunctions()
 
 
 def method_function(name: str) -> Callable:
-    """The function implementing integration method ``name`` (lazy imports resolved)."""
-    import importlib
-
-    if name not in METHODS:
-        raise ValueError(f"method: must be one of {', '.join(sorted(METHODS))}; got {name!r}")
-    f = METHODS[name]
-    doc = f.__doc__ or ""
-    if doc.startswith("See :func:`restore.integration."):
-        module, func = doc.split("`")[1].rsplit(".", 1)
-        f = getattr(importlib.import_module(module), func)
-    return f
+    """The function implementing integration method ``name``."""
+    return integration_method(name).function
 
 
 def method_options(name: str) -> dict:
     """Keyword options of method ``name`` a scenario may set, with their defaults."""
-    import inspect
-
-    sig = inspect.signature(method_function(name))
-    return {p.name: p.default for p in sig.parameters.values()
-            if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name not in PIPELINE_OPTIONS}
+    return integration_method(name).options()
 
 
 def _check_value(value, default, key: str) -> None:
-    import math
-
     if isinstance(value, bool) or isinstance(default, bool):
         if default is not None and isinstance(default, bool) != isinstance(value, bool):
             raise ValueError(f"{key}: must be {'true or false' if isinstance(default, bool) else 'a number'}, "
@@ -155,8 +132,6 @@ def check_options(name: str | None, options: dict, *, where: str = "restoration.
         Naming ``where.option``: an option the method does not take (with the
         ones it does), or a value of the wrong type, not finite or negative.
     """
-    import difflib
-
     name = DEFAULT_METHOD if name is None else name
     allowed = method_options(name)
     for key, value in options.items():
@@ -170,8 +145,6 @@ def check_options(name: str | None, options: dict, *, where: str = "restoration.
 
 
 def _check_taus(diffs, taus, dt) -> None:
-    import math
-
     if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
         raise ValueError(f"dt: must be a finite sampling step > 0 [s], got {dt!r}")
     try:
@@ -214,8 +187,6 @@ def integrate(diffs, taus, dt, method: str | None = None, **options) -> np.ndarr
     ndarray, shape (N,)
         theta at ``n dt`` (rad), mean removed, NaN where no estimate exists.
     """
-    name = DEFAULT_METHOD if method is None else method
-    if name not in METHODS:
-        raise ValueError(f"method: must be one of {', '.join(sorted(METHODS))}; got {method!r}")
+    spec = integration_method(method)
     _check_taus(diffs, taus, dt)
-    return METHODS[name](diffs, taus, dt, **options)
+    return spec.function(diffs, taus, dt, **options)

@@ -21,7 +21,9 @@ from scipy.interpolate import BSpline
 
 from ._common import check_positive, prepare
 from .gaps import estimable_mask
-from .spectrum import find_lines, spectrum_for_lines
+from .methods import integration_method
+from .spectrum import find_lines
+from .wiener import spectrum_for_lines
 
 __all__ = ["integrate_harmonic", "HarmonicModel"]
 
@@ -164,10 +166,9 @@ def integrate_harmonic(diffs, taus, dt, *, frequencies_hz=None, knot_spacing_s: 
     coef = np.linalg.solve(AtA + lam * np.eye(model.n_coef), Atb)
     theta = model.evaluate(coef, t)
     if residual is not None:
-        from . import integrate  # local import: avoid a cycle at module load
         pred = np.vstack([model.evaluate(coef, t + tau) - theta for tau in taus])
-        extra = integrate(np.where(valid, D - pred, np.nan), taus, dt, method=residual,
-                          noise_std=spec.noise_std, max_gap_s=max_gap_s)
+        extra = integration_method(residual).function(np.where(valid, D - pred, np.nan), taus, dt,
+                                                      noise_std=spec.noise_std, max_gap_s=max_gap_s)
         theta = theta + np.nan_to_num(extra - np.nanmean(extra))
     max_gap = int(round((taus.max() if max_gap_s is None else
                          check_positive("max_gap_s", max_gap_s, allow_zero=True)) / dt))

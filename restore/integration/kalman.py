@@ -33,7 +33,8 @@ from scipy.sparse import csr_matrix
 
 from ._common import check_positive, lagrange4, prepare
 from .gaps import estimable_mask
-from .spectrum import find_lines, spectrum_for_lines
+from .spectrum import find_lines
+from .wiener import spectrum_for_lines
 
 __all__ = ["KalmanSmoother", "kalman_smooth", "integrate_kalman", "oscillator_model"]
 

@@ -29,7 +29,8 @@ from scipy.linalg import solve
 
 from ._common import check_positive, per_pair, prepare
 from .gaps import estimable_mask, fill_from_differentials, interpolate_gaps
-from .spectrum import find_lines, spectrum_for_lines
+from .spectrum import find_lines
+from .wiener import spectrum_for_lines
 
 __all__ = ["LocalIntegrator", "integrate_local", "default_offsets"]
 

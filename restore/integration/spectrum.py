@@ -25,8 +25,7 @@ from scipy.stats import gamma
 
 from ._common import per_pair, prepare
 
-__all__ = ["SpectralEstimate", "estimate_noise", "estimate_spectrum", "find_lines", "Lines",
-           "spectrum_for_lines"]
+__all__ = ["SpectralEstimate", "estimate_noise", "estimate_spectrum", "find_lines", "Lines"]
 
 _BLIND_G2 = 0.05
 
@@ -320,23 +319,3 @@ def find_lines(spec: SpectralEstimate, *, max_lines: int = 32, min_separation_hz
     idx = idx[np.argsort(var[idx])[::-1][:max_lines]]
     idx = idx[np.argsort(freq[idx])]
     return Lines(freq[idx], var[idx], width[idx])
-
-
-def spectrum_for_lines(diffs, taus, dt, *, noise_std=None, spectrum_options: dict | None = None,
-                       gap_threshold: float = 0.01) -> SpectralEstimate:
-    """Spectrum with full frequency resolution even when the differentials have gaps.
-
-    Without gaps (missing fraction <= ``gap_threshold``) this is
-    :func:`estimate_spectrum`.  With gaps, the gap-free segments only give a
-    coarse resolution, so the spectrum is the one refined by
-    :func:`~restore.integration.wiener.integrate_wiener` (gaps filled by its
-    predictions, noise from its residuals).
-    """
-    D, valid, taus, dt = prepare(diffs, taus, dt)
-    opts = dict(spectrum_options or {})
-    if 1.0 - valid.mean() <= gap_threshold:
-        return estimate_spectrum(D, taus, dt, noise_std=noise_std, **opts)
-    from .wiener import integrate_wiener  # local import: wiener depends on this module
-    res = integrate_wiener(D, taus, dt, noise_std=noise_std, spectrum_options=opts,
-                           return_details=True)
-    return res.spectrum

@@ -34,7 +34,7 @@ from ._common import check_positive, prepare
 from .gaps import estimable_mask
 from .spectrum import SpectralEstimate, estimate_spectrum
 
-__all__ = ["integrate_inverse", "integrate_wiener_fft", "integrate_wiener", "WienerResult"]
+__all__ = ["integrate_inverse", "integrate_wiener_fft", "integrate_wiener", "WienerResult", "spectrum_for_lines"]
 
 
 def _grid(n: int, taus: np.ndarray, dt: float, pad_fraction: float) -> int:
@@ -312,3 +312,22 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
     if return_details:
         return WienerResult(theta, full - np.mean(full), spec, it, res)
     return theta
+
+
+def spectrum_for_lines(diffs, taus, dt, *, noise_std=None, spectrum_options: dict | None = None,
+                       gap_threshold: float = 0.01) -> SpectralEstimate:
+    """Spectrum with full frequency resolution even when the differentials have gaps.
+
+    Without gaps (missing fraction <= ``gap_threshold``) this is
+    :func:`estimate_spectrum`.  With gaps, the gap-free segments only give a
+    coarse resolution, so the spectrum is the one refined by
+    :func:`~restore.integration.wiener.integrate_wiener` (gaps filled by its
+    predictions, noise from its residuals).
+    """
+    D, valid, taus, dt = prepare(diffs, taus, dt)
+    opts = dict(spectrum_options or {})
+    if 1.0 - valid.mean() <= gap_threshold:
+        return estimate_spectrum(D, taus, dt, noise_std=noise_std, **opts)
+    res = integrate_wiener(D, taus, dt, noise_std=noise_std, spectrum_options=opts,
+                           return_details=True)
+    return res.spectrum

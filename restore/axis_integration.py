@@ -1,0 +1,152 @@
+"""Integration of one axis from the pairs' differentials, as the restoration does it.
+
+:func:`integrate_axis` is *the* integration step: the pipeline calls it on the
+measured differentials, and the report calls it again with the inputs
+``restoration.nc`` recorded (on true differentials, on noise) to split the
+error budget. Both go through the same code, so the budget cannot drift from
+what the pipeline did.
+
+Steps:
+
+1. time synchronisation — band B sees line ``l`` of A at ``t + τ + λ(l)``, not
+   ``t + τ``; a method that models per-line lags gets them, any other gets
+   differentials brought back to the nominal lag with a lag-aware estimate
+   θ̂ (``lsq``): ``D_j − [θ̂(t + τ_j + λ_j) − θ̂(t + τ_j)]``;
+2. the method itself, with the per-line data it takes (weights, lags,
+   sigmas: see :mod:`restore.integration.methods`);
+3. high-pass of the estimate at ``highpass_hz`` (the AOCS knows the low
+   frequencies: keep only what the images add).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from .integration import integrate
+from .integration.methods import IntegrationMethod, integration_method
+from .synthesis import highpass_nan
+
+__all__ = ["AxisIntegration", "PriorSpectrum", "integrate_axis", "lag_corrected_differentials"]
+
+
+@dataclass
+class PriorSpectrum:
+    """PSD prior and noise levels a data-adaptive method used (rad²/Hz two-sided, rad per sample)."""
+
+    freq: np.ndarray
+    psd: np.ndarray
+    noise_std: np.ndarray
+
+
+@dataclass
+class AxisIntegration:
+    """Result of :func:`integrate_axis`.
+
+    Attributes
+    ----------
+    theta : ndarray
+        Estimate [rad] at the line times, high-passed, NaN where not estimated.
+    method : IntegrationMethod
+        The method's spec.
+    options : dict
+        The scenario's options the method ran with (per-line data excluded).
+    spectrum : PriorSpectrum or None
+        The prior the method estimated from the data (methods that report it),
+        None otherwise or when the prior was given.
+    """
+
+    theta: np.ndarray
+    method: IntegrationMethod
+    options: dict = field(default_factory=dict)
+    spectrum: PriorSpectrum | None = None
+
+    def frozen_options(self) -> dict:
+        """Options that make the method the fixed filter of this run (its estimated prior given)."""
+        return self.method.frozen_options(self.options, self.spectrum)
+
+
+def _shifted(x: np.ndarray, t_idx: np.ndarray) -> np.ndarray:
+    """Cubic interpolation of a line-sampled signal at fractional line indices (0 outside / at NaN)."""
+    x = np.nan_to_num(np.asarray(x, dtype=np.float64))
+    return CubicSpline(np.arange(x.size), x)(np.clip(t_idx, 0, x.size - 1))
+
+
+def lag_corrected_differentials(diffs, taus, dt: float, lags, estimate) -> list:
+    """Differentials brought back to their nominal lag: ``D_j − [θ̂(t + τ_j + λ_j) − θ̂(t + τ_j)]``.
+
+    Parameters
+    ----------
+    diffs : sequence of ndarray (N,)
+        Measured differentials [rad], NaN at gaps.
+    taus : sequence of float
+        Nominal lag of each pair [s].
+    dt : float
+        Line period [s].
+    lags : sequence of ndarray (N,)
+        Extra lag of each pair at each line [s].
+    estimate : ndarray (N,)
+        Lag-aware estimate θ̂ [rad].
+    """
+    idx = np.arange(len(diffs[0]), dtype=np.float64)
+    out = []
+    for d, tau, lag in zip(diffs, taus, lags):
+        base = idx + tau / dt
+        out.append(d - (_shifted(estimate, base + np.asarray(lag) / dt) - _shifted(estimate, base)))
+    return out
+
+
+def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options: dict | None = None,
+                   lags=None, sigmas=None, weights=None, highpass_hz: float = 0.0) -> AxisIntegration:
+    """Integrate one axis's differentials of every pair (time synchronisation, method, high-pass).
+
+    Parameters
+    ----------
+    diffs : sequence of ndarray (N,)
+        ``diffs[j][n] ≈ θ(n dt + τ_j + λ_j[n]) − θ(n dt)`` [rad], NaN at gaps.
+    taus : sequence of float
+        Lag of each pair [s].
+    dt : float
+        Line period [s].
+    method : str, optional
+        Integration method (default :data:`restore.integration.DEFAULT_METHOD`).
+    options : dict, optional
+        The method's options (as a scenario gives them, or frozen).
+    lags : sequence of ndarray (N,), optional
+        Extra lag per pair and line [s] (time synchronisation); None: constant lags.
+    sigmas : sequence of ndarray (N,), optional
+        Per-line formal σ of the differentials [rad].
+    weights : sequence of ndarray (N,), optional
+        Relative weight of each pair's line.
+    highpass_hz : float
+        Cut-off of the high-pass applied to the estimate (0: none).
+
+    Returns
+    -------
+    AxisIntegration
+    """
+    spec = integration_method(method)
+    opts = dict(options or {})
+    diffs = [np.asarray(d, dtype=np.float64) for d in diffs]
+    taus = [float(t) for t in taus]
+    timed = lags is not None and any(np.any(np.asarray(lg) != 0) for lg in lags)
+    if timed and not spec.line_lags:
+        lsq = integration_method("lsq")
+        first = lsq.function(diffs, taus, dt, **lsq.data_options(lags=lags, sigmas=sigmas))
+        diffs = lag_corrected_differentials(diffs, taus, dt, lags, first)
+    data = spec.data_options(weights=weights, lags=lags, sigmas=sigmas)
+    prior = None
+    if spec.reports_spectrum and "psd" not in opts:
+        res = integrate(diffs, taus, dt, method=spec.name, **opts, **data, return_details=True)
+        theta = res.theta
+        prior = PriorSpectrum(np.asarray(res.spectrum.freq, dtype=np.float64),
+                              np.asarray(res.spectrum.psd, dtype=np.float64),
+                              np.broadcast_to(np.asarray(res.spectrum.noise_std, dtype=np.float64),
+                                              (len(taus),)).copy())
+    else:
+        theta = integrate(diffs, taus, dt, method=spec.name, **opts, **data)
+    theta = np.asarray(theta, dtype=np.float64)
+    if highpass_hz > 0:
+        theta = highpass_nan(theta, dt=dt, cutoff_hz=highpass_hz)
+    return AxisIntegration(theta=theta, method=spec, options=opts, spectrum=prior)

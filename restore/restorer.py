@@ -1,0 +1,194 @@
+"""The restoration as a composition of its stages (:mod:`restore.stages`).
+
+>>> res = Restorer(settings).run(product)          # doctest: +SKIP
+
+:meth:`Restorer.run` reads as the method: match every pair, then iterate
+synthesis and integration (re-predicting with the refined attitude), remove
+the unobservable mean, anchor on the star tracker, check the coverage, correct
+the images. Never reads ``truth.nc``.
+"""
+from __future__ import annotations
+
+import sys
+import time as _time
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from simsat.product import Product, clamped_attitude
+
+from . import stages
+from .errors import RestorationError
+from .integration.methods import integration_method
+from .result import PairData, RestorationResult
+from .settings import RestorationSettings
+from .synthesis import AXES
+
+__all__ = ["Restorer"]
+
+
+class _Progress:
+    """A tqdm bar over the stages (silent when disabled)."""
+
+    def __init__(self, enabled: bool, total: int):
+        self.bar = tqdm(total=total, desc="restore", unit="stage", file=sys.stderr, dynamic_ncols=True) \
+            if enabled else None
+
+    def step(self, label: str):
+        if self.bar is not None:
+            self.bar.set_postfix_str(label)
+            self.bar.update(1)
+
+    def note(self, label: str):
+        """Say what the current stage is doing, without advancing."""
+        if self.bar is not None:
+            self.bar.set_postfix_str(label)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+class Restorer:
+    """Restore the line-of-sight attitude of a product from its bands.
+
+    Parameters
+    ----------
+    settings : RestorationSettings, optional
+        The ``[restoration]`` settings (defaults otherwise).
+    progress : bool
+        Show a progress bar over the stages on stderr.
+    """
+
+    def __init__(self, settings: RestorationSettings | None = None, *, progress: bool = False):
+        self.settings = settings or RestorationSettings()
+        self.progress = progress
+
+    def run(self, product: Product, *, run_dir: Path | None = None, corrected_path: Path | None = None,
+            corrected_attrs: dict | None = None) -> RestorationResult:
+        """Restore ``product``.
+
+        With ``corrected_path``, the corrected images are written there block
+        by block (memory bounded by one band) and ``result.corrected`` is that
+        file opened lazily; otherwise they are kept in memory.
+        """
+        s = self.settings
+        t_all = _time.perf_counter()
+        timings: dict = {}
+        pairs_ab = stages.resolve_pairs(product, s)
+        bar = _Progress(self.progress, len(pairs_ab) + self._n_iterations(len(pairs_ab)) + 2)
+        try:
+            t = _time.perf_counter()
+            pairs = self.match(product, pairs_ab, bar)
+            timings["matching_s"] = _time.perf_counter() - t
+            knowledge = dict(zip(AXES, product.knowledge.at(product.time)))
+            pairs, records, estimate = self.synthesise_and_integrate(product, pairs, knowledge, timings, bar)
+            correction = stages.remove_mean(estimate, s.axes)
+            restored = {a: knowledge[a] + correction[a] for a in AXES}
+            anchored = False
+            if s.anchor_star_tracker:
+                restored, anchored = stages.anchor_on_star_tracker(restored, product.time, product.star_tracker,
+                                                                   s.axes)
+            coverage = stages.check_coverage(restored, s, product.path)
+            bar.step("integrated")
+            t = _time.perf_counter()
+            corrected, misreg = None, {}
+            if s.correct_images:
+                corrected, misreg = stages.correct_images(product, product.time, restored, knowledge, pairs, s,
+                                                          path=corrected_path, attrs=corrected_attrs)
+            timings["correction_s"] = _time.perf_counter() - t
+            bar.step("corrected")
+        finally:
+            bar.close()
+        n_matches = sum(p.valid.size for p in pairs)
+        timings["total_s"] = _time.perf_counter() - t_all
+        timings["lines_per_s"] = product.time.size / timings["total_s"]
+        timings["matches_per_s"] = n_matches / max(timings["matching_s"], 1e-9)
+        timings["matches"] = n_matches
+        return RestorationResult(run_dir=run_dir, time=product.time, restored=restored, knowledge=knowledge,
+                                 correction=correction, coverage=coverage, pairs=pairs, timings=timings,
+                                 misregistration=misreg, settings=s, pixel_ifov_rad=product.pixel_ifov_rad,
+                                 method=integration_method(s.method).name, integration=records,
+                                 anchored=anchored, corrected=corrected)
+
+    def _n_iterations(self, n_pairs: int) -> int:
+        # best_first (patent claims 9-11): the best-correlated pair alone first, then the next ones
+        # folded in one per iteration, re-predicting with the refined attitude, then all of them
+        # until the increment is immaterial (at most `iterations` passes after the last pair)
+        s = self.settings
+        return s.iterations if s.pair_order == "fused" else n_pairs - 1 + s.iterations
+
+    def match(self, product: Product, pairs_ab: list, bar) -> list[PairData]:
+        """Select and match every pair (knowledge prediction, pilot-centred search)."""
+        s = self.settings
+        if s.match_method == "ncc" and stages.ncc_kernel_cold():
+            bar.note("loading the matching kernel (compiled on first use, ~10-15 s, cached after)")
+        sm = product.sensor_model()
+        pairs = []
+        for a, b in pairs_ab:
+            pairs.append(stages.match_pair(product, a, b, s, sm))
+            bar.step(f"matched {a}/{b}")
+        n_matches = sum(p.valid.size for p in pairs)
+        n_valid = sum(int(np.count_nonzero(p.valid)) for p in pairs)
+        if n_valid < s.min_points_per_line * 10:
+            raise RestorationError(
+                f"{product.path}: no usable texture — only {n_valid} valid matches out of {n_matches} candidates over "
+                f"{len(pairs)} pairs (water, clouds, flat areas or noise everywhere? candidates pass the a-priori "
+                f"criterion restoration.texture_max_std_px = {s.texture_max_std_px}, matches "
+                f"restoration.min_quality = {s.min_quality}); nothing to restore")
+        return pairs
+
+    def synthesise_and_integrate(self, product: Product, pairs: list, knowledge: dict, timings: dict, bar) -> tuple:
+        """Iterate synthesis and integration; returns (pairs as last synthesised, records, estimate).
+
+        Each iteration re-predicts the matches with the knowledge plus the
+        estimate so far, synthesises the differentials of the pairs in use and
+        integrates the remaining differentials of every restored axis.
+        """
+        s = self.settings
+        t_line, te, n_lines = product.time, product.instrument.line_period_s, product.time.size
+        estimate = {a: np.zeros(n_lines) for a in AXES}
+        order = self._pair_ranking(pairs)
+        sens: dict = {}
+        records: dict = {}
+        t_syn = t_int = 0.0
+        for it in range(self._n_iterations(len(pairs))):
+            ts = _time.perf_counter()
+            used_idx = sorted(order[:it + 1]) if s.pair_order == "best_first" else list(range(len(pairs)))
+            sm = product.sensor_model() if it == 0 else product.sensor_model(attitude=clamped_attitude(
+                stages.attitude_series(t_line, {a: knowledge[a] + np.nan_to_num(estimate[a]) for a in AXES})))
+            for j in used_idx:
+                pairs[j] = stages.synthesise_pair(pairs[j], sm, s, n_lines, sens=sens.get(j))
+                sens.setdefault(j, pairs[j].sens)
+            used = [pairs[j] for j in used_idx]
+            differentials = [stages.pair_differentials(p, s, n_lines, te) for p in used]
+            t_syn += _time.perf_counter() - ts
+            ti = _time.perf_counter()
+            change = 0.0
+            for a in s.axes:
+                rec = stages.integrate_differentials(a, used, differentials, estimate[a], s, te, where=product.path)
+                records[a] = rec
+                new_est = np.where(np.isfinite(rec.increment), np.nan_to_num(estimate[a]) + rec.increment, np.nan)
+                if np.isfinite(new_est).any():
+                    change = max(change, float(np.sqrt(np.nanmean(rec.increment ** 2)) /
+                                               max(np.sqrt(np.nanmean(new_est ** 2)), 1e-300)))
+                estimate[a] = new_est
+            t_int += _time.perf_counter() - ti
+            bar.step(f"iteration {it + 1}" + (f" ({len(used)} pair{'s' * (len(used) > 1)})"
+                                              if s.pair_order == "best_first" else ""))
+            if s.pair_order == "best_first" and len(used) == len(pairs) and it > 0 and change < 0.02:
+                break  # converged: the last pass changed the estimate by < 2 % RMS
+        timings["synthesis_s"] = t_syn
+        timings["integration_s"] = t_int
+        for a in AXES:
+            if a not in s.axes:
+                estimate[a] = np.zeros(n_lines)
+        return pairs, records, estimate
+
+    @staticmethod
+    def _pair_ranking(pairs: list) -> list[int]:
+        """Pairs ranked by correlation: valid matches × their mean quality, best first."""
+        score = [float(np.count_nonzero(p.valid)) * float(np.nanmean(p.quality[p.valid])) if p.valid.any() else 0.0
+                 for p in pairs]
+        return sorted(range(len(pairs)), key=lambda j: -score[j])

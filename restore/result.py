@@ -1,0 +1,139 @@
+"""What a restoration produces: per-pair matches, per-axis integration records, the restored attitude.
+
+The same types come out of the pipeline (:class:`restore.restorer.Restorer`)
+and out of the reader of ``restoration.nc``
+(:func:`restore.restoration_io.read_restoration`): a consumer (the report, a
+study) sees exactly what the pipeline did.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .axis_integration import PriorSpectrum, integrate_axis
+from .integration.methods import integration_method
+from .settings import RestorationSettings
+
+__all__ = ["PairData", "IntegrationRecord", "RestorationResult"]
+
+
+@dataclass
+class PairData:
+    """Matches of one band pair, with the synthesis of the last iteration.
+
+    Coordinates are in pixels: ``line_a``/``col_a`` in band ``ahead``; the
+    measured (``meas_*``) and predicted (``pred_*``, with the attitude of the
+    last iteration) positions in band ``behind``.
+    """
+
+    name: str
+    ahead: str
+    behind: str
+    tau_s: float
+    line_a: np.ndarray
+    col_a: np.ndarray
+    meas_line_b: np.ndarray
+    meas_col_b: np.ndarray
+    quality: np.ndarray
+    valid: np.ndarray
+    pred_line_b: np.ndarray | None = None
+    pred_col_b: np.ndarray | None = None
+    sens: np.ndarray | None = None
+    inlier: np.ndarray | None = None
+    synthesis: object = None
+    std_line: np.ndarray | None = None
+    std_col: np.ndarray | None = None
+    nominal_tau_s: float | None = None
+    residual_rms_px: float = float("nan")
+
+
+@dataclass
+class IntegrationRecord:
+    """The last integration of one axis, as :func:`restore.axis_integration.integrate_axis` ran it.
+
+    Arrays are over (pair, line) for the pairs of ``pairs`` (the pairs the
+    last iteration used). ``increment`` is what that integration returned,
+    ``previous`` the estimate it was added to (zero with one iteration): the
+    correction is ``previous + increment`` with the mean removed.
+    """
+
+    axis: str
+    pairs: list
+    diffs: np.ndarray
+    sigmas: np.ndarray
+    taus: np.ndarray
+    lags_s: np.ndarray
+    weights: np.ndarray
+    line_period_s: float
+    method: str
+    options: dict
+    highpass_hz: float
+    spectrum: PriorSpectrum | None
+    increment: np.ndarray
+    previous: np.ndarray
+
+    def rerun(self, diffs=None, *, frozen: bool = True) -> np.ndarray:
+        """Integrate other differentials (true ones, noisy ones) through this axis's integration.
+
+        With ``frozen`` a data-adaptive method keeps the prior it estimated on
+        the measured differentials: the filter is the one that was applied.
+        """
+        opts = integration_method(self.method).frozen_options(self.options, self.spectrum if frozen else None)
+        d = self.diffs if diffs is None else np.asarray(diffs, dtype=np.float64)
+        return integrate_axis(list(d), list(self.taus), self.line_period_s, method=self.method, options=opts,
+                              lags=list(self.lags_s), sigmas=list(self.sigmas), weights=list(self.weights),
+                              highpass_hz=self.highpass_hz).theta
+
+    def frozen_options(self) -> dict:
+        """The method's options with its estimated prior fixed (see :meth:`rerun`)."""
+        return integration_method(self.method).frozen_options(self.options, self.spectrum)
+
+
+@dataclass
+class RestorationResult:
+    """The restored line-of-sight attitude and how it was obtained (angles in rad, times in s)."""
+
+    run_dir: Path | None
+    time: np.ndarray
+    restored: dict
+    knowledge: dict
+    correction: dict
+    coverage: dict
+    pairs: list
+    timings: dict
+    misregistration: dict
+    settings: RestorationSettings
+    pixel_ifov_rad: float
+    method: str
+    integration: dict = field(default_factory=dict)
+    anchored: bool = False
+    path: Path | None = None
+    corrected: object = None
+
+    def summary(self) -> str:
+        """A few lines for the terminal: pairs, matches, coverage, correction, misregistration, speed."""
+        px = self.pixel_ifov_rad
+        lines = [f"restoration ({self.method}, {len(self.pairs)} pairs: "
+                 f"{', '.join(f'{p.name} {p.tau_s * 1e3:.1f} ms' for p in self.pairs)})"]
+        for p in self.pairs:
+            n_ok = int(np.count_nonzero(p.valid))
+            lines.append(f"  {p.name}: {n_ok} / {p.valid.size} matches valid, "
+                         f"{int(np.count_nonzero(p.inlier)) if p.inlier is not None else 0} inliers, "
+                         f"synthesis residual {p.residual_rms_px:.3f} px")
+        cov = ", ".join(f"{a} {self.coverage[a] * 100:.1f} %" for a in self.settings.axes)
+        lines.append(f"  coverage: {cov}")
+        corr = ", ".join(f"{a} {np.nanstd(self.correction[a]) / px:.3f} px rms" for a in self.settings.axes)
+        lines.append(f"  correction applied: {corr}")
+        for k, v in (self.misregistration or {}).items():
+            lines.append(f"  misregistration {k}: before {v['before_px']:.3f} px, after {v['after_px']:.3f} px "
+                         f"measured (line {v['after_line_px']:.3f}, column {v['after_col_px']:.3f}; matching "
+                         f"noise {v['after_noise_px']:.3f} px); without the noise {v['after_signal_px']:.3f} px "
+                         f"(line {v['after_line_signal_px']:.3f}, column {v['after_col_signal_px']:.3f})")
+        t = self.timings
+        lines.append(f"  time: {t.get('total_s', 0):.1f} s ({t.get('lines_per_s', 0):.0f} lines/s, "
+                     f"{t.get('matches_per_s', 0):.0f} matches/s)")
+        if self.path:
+            lines.append(f"  wrote {self.path}")
+        return "\n".join(lines)

@@ -1,0 +1,109 @@
+"""``[restoration]`` settings: the dataclass, its parser (every key optional) and its JSON form."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from simsat.config import ScenarioError, Section
+
+from .integration import check_options, integration_method
+from .synthesis import AXES
+
+__all__ = ["RestorationSettings", "restoration_settings", "settings_dict"]
+
+
+@dataclass
+class RestorationSettings:
+    pairs: list | str = "auto"
+    selection: str = "grid"
+    points_per_line: int = 24
+    texture_max_std_px: float = 0.4
+    window: tuple = (3, 31)
+    search: tuple = (3, 3)
+    pilot_search: tuple = (8, 8)
+    match_method: str = "ncc"
+    min_quality: float = 0.6
+    axes: tuple = ("roll", "pitch")
+    n_sigma: float = 3.0
+    min_points_per_line: int = 3
+    highpass_hz: float = 2.0
+    max_gap_fill_lines: int = 8
+    compensate_window: bool = True
+    method: str | None = None
+    integration_options: dict = field(default_factory=dict)
+    iterations: int = 1
+    pair_order: str = "fused"
+    anchor_star_tracker: bool = True
+    correct_images: bool = True
+    correction_column_step: int = 64
+    min_coverage: float = 0.05
+
+
+def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
+    """Parse the ``[restoration]`` table (every key optional)."""
+    if not isinstance(sec, Section):
+        sec = Section(sec or {}, "restoration")
+    s = RestorationSettings()
+    pairs = sec.raw("pairs", "auto")
+    if pairs != "auto":
+        if isinstance(pairs, str):
+            pairs = [pairs]
+        if not isinstance(pairs, list) or not all(isinstance(p, str) and p.count("/") == 1 for p in pairs):
+            raise sec.error("pairs", f"must be \"auto\" or an array of \"AHEAD/BEHIND\" band names, got {pairs!r}")
+    s.pairs = pairs
+    s.selection = sec.string("selection", s.selection, choices=("grid", "double_gradient", "spread"))
+    s.points_per_line = sec.integer("points_per_line", s.points_per_line, ge=3, le=1000)
+    s.texture_max_std_px = sec.number("texture_max_std_px", s.texture_max_std_px, gt=0)
+    wl = sec.integer("window_lines", s.window[0], ge=1, le=63)
+    wc = sec.integer("window_columns", s.window[1], ge=3, le=255)
+    if wl % 2 == 0:
+        raise sec.error("window_lines", f"must be odd, got {wl}")
+    if wc % 2 == 0:
+        raise sec.error("window_columns", f"must be odd, got {wc}")
+    s.window = (wl, wc)
+    s.search = (sec.integer("search_lines", s.search[0], ge=0, le=64), sec.integer("search_columns", s.search[1], ge=0, le=64))
+    s.pilot_search = (sec.integer("pilot_search_lines", s.pilot_search[0], ge=0, le=64),
+                      sec.integer("pilot_search_columns", s.pilot_search[1], ge=0, le=64))
+    s.match_method = sec.string("match_method", s.match_method, choices=("ncc", "phase"))
+    s.min_quality = sec.number("min_quality", s.min_quality, ge=-1, le=1)
+    s.axes = tuple(sec.strings("axes", list(s.axes), choices=AXES))
+    if not s.axes:
+        raise sec.error("axes", f"must name at least one axis of {', '.join(AXES)}")
+    if len(set(s.axes)) != len(s.axes):
+        raise sec.error("axes", f"names an axis twice: {list(s.axes)}")
+    s.n_sigma = sec.number("n_sigma", s.n_sigma, gt=0)
+    s.min_points_per_line = sec.integer("min_points_per_line", s.min_points_per_line, ge=2)
+    s.highpass_hz = sec.number("highpass_hz", s.highpass_hz, ge=0)
+    s.max_gap_fill_lines = sec.integer("max_gap_fill_lines", s.max_gap_fill_lines, ge=0)
+    s.compensate_window = sec.boolean("compensate_window", s.compensate_window)
+    m = sec.raw("method", None)
+    if m is not None:
+        if not isinstance(m, str):
+            raise sec.error("method", f"must be a method name (string), got {m!r}")
+        try:
+            integration_method(m)
+        except ValueError as e:
+            raise sec.error("method", str(e).split(": ", 1)[1]) from None
+    s.method = m
+    opts = sec.section("integration")
+    try:
+        s.integration_options = dict(check_options(m, dict(opts.data), where=opts.path))
+    except ValueError as e:
+        raise ScenarioError(str(e)) from None
+    opts.finish(extra_allowed=opts.data.keys())
+    s.iterations = sec.integer("iterations", s.iterations, ge=1, le=10)
+    s.pair_order = sec.string("pair_order", s.pair_order, choices=("fused", "best_first"))
+    s.anchor_star_tracker = sec.boolean("anchor_star_tracker", s.anchor_star_tracker)
+    s.correct_images = sec.boolean("correct_images", s.correct_images)
+    s.correction_column_step = sec.integer("correction_column_step", s.correction_column_step, ge=1)
+    s.min_coverage = sec.number("min_coverage", s.min_coverage, ge=0, le=1)
+    sec.finish()
+    return s
+
+
+def settings_dict(s: RestorationSettings) -> dict:
+    """The settings as a JSON-serialisable dict (recorded in ``restoration.nc``)."""
+    d = dict(s.__dict__)
+    d["window"] = list(s.window)
+    d["search"] = list(s.search)
+    d["axes"] = list(s.axes)
+    return d

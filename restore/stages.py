@@ -1,0 +1,386 @@
+"""The stages of the restoration, each a function with explicit inputs and outputs.
+
+select → match (per pair) → synthesise → integrate (per axis, over the pairs)
+→ anchor → correct. :class:`restore.restorer.Restorer` composes them; each
+can be called alone (tests, studies). Never reads ``truth.nc``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from simsat.attitude import AttitudeSeries
+from simsat.config import ScenarioError
+from simsat.product import Product
+
+from .axis_integration import integrate_axis
+from .correction import correct_bands, line_median, misregistration, rank_within_line
+from .errors import RestorationError
+from .matching import match_points, support_margin
+from .result import IntegrationRecord, PairData
+from .selection import select_points_in_blocks
+from .settings import RestorationSettings
+from .synthesis import AXES, drop_sparse, fill_short_gaps, instant_synthesis, window_compensation
+
+__all__ = ["auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "select_candidates", "match_candidates",
+           "match_pair", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
+           "integrate_differentials", "remove_mean", "anchor_on_star_tracker", "check_coverage", "correct_images",
+           "attitude_series"]
+
+
+# --------------------------------------------------------------------------- pairs, select, match
+def auto_pairs(product: Product) -> list[tuple[str, str]]:
+    """All pairs of the visible bands (most correlated), ordered ahead/behind."""
+    dets = list(product.instrument.detectors)
+    vis = [d for d in dets if d.band in ("blue", "green", "red")]
+    use = vis if len(vis) >= 2 else dets
+    pairs = []
+    for i, a in enumerate(use):
+        for b in use[i + 1:]:
+            if a.along_m == b.along_m:
+                continue
+            ahead, behind = (a, b) if a.along_m > b.along_m else (b, a)
+            pairs.append((ahead.name, behind.name))
+    if not pairs:
+        raise RestorationError("no band pair with different along-track positions: differentials are impossible")
+    return pairs
+
+
+def resolve_pairs(product: Product, settings: RestorationSettings) -> list[tuple[str, str]]:
+    """The (ahead, behind) band pairs of ``restoration.pairs`` ("auto": :func:`auto_pairs`)."""
+    if settings.pairs == "auto":
+        return auto_pairs(product)
+    names = product.band_names
+    out = []
+    for p in settings.pairs:
+        a, b = p.split("/")
+        for n in (a, b):
+            if n not in names:
+                raise ScenarioError(f"restoration.pairs: unknown band {n!r} in {p!r} (bands: {', '.join(names)})")
+        da, db = product.instrument.detector(a), product.instrument.detector(b)
+        if da.along_m == db.along_m:
+            raise ScenarioError(f"restoration.pairs: {p!r} has no delay (same along-track position)")
+        out.append((a, b) if da.along_m > db.along_m else (b, a))
+    return out
+
+
+
+
+#: pilot matching: every how many lines, and at most how many points per line
+_PILOT_LINE_STEP = 2
+_PILOT_POINTS = 6
+
+
+def pilot_shift(img_a, img_b, lines_a, cols_a, pred_l, pred_c, n_lines: int, settings: RestorationSettings):
+    """Per-line shift of band B with respect to the knowledge prediction [px], from a sparse wide search.
+
+    The knowledge prediction can be off by more than the matcher's search
+    half-range where the jitter differential peaks (beats of the CMG lines).
+    A pilot pass matches a few points of every other line with the wide
+    ``settings.pilot_search``; the median shift of each line (interpolated
+    between lines) re-centres the search of every point, so that the
+    search area follows the predictor's actual accuracy while staying small
+    (few false peaks on periodic textures).
+
+    Returns
+    -------
+    (shift_lines, shift_cols) : ndarray (n_lines,) each
+        Zero where nothing could be measured (and everywhere when the pilot
+        search is not wider than the search).
+    """
+    zero = (np.zeros(n_lines), np.zeros(n_lines))
+    ps = settings.pilot_search
+    if lines_a.size == 0 or (ps[0] <= settings.search[0] and ps[1] <= settings.search[1]):
+        return zero
+    ps = (max(ps[0], settings.search[0]), max(ps[1], settings.search[1]))
+    li = np.rint(lines_a).astype(np.int64)
+    # a few points spread along each pilot line (every k-th of its points in column order)
+    rank, count = rank_within_line(li, cols_a)
+    keep = (rank % np.maximum(count // _PILOT_POINTS, 1) == 0) & (li % _PILOT_LINE_STEP == 0)
+    ml, mc = support_margin(window=settings.window, search=ps)
+    nb = img_b.shape
+    keep &= (pred_l > ml) & (pred_l < nb[0] - 1 - ml) & (pred_c > mc) & (pred_c < nb[1] - 1 - mc)
+    if not keep.any():
+        return zero
+    m = match_points(img_a, img_b, lines_a[keep], cols_a[keep], pred_l[keep], pred_c[keep], window=settings.window,
+                     search=ps, method="ncc", min_quality=settings.min_quality)
+    ok = np.asarray(m.valid, bool)
+    if ok.sum() < 2:
+        return zero
+    lk = li[keep][ok]
+    few = np.bincount(lk, minlength=n_lines)[:n_lines] < 2  # a line's shift needs two points at least
+    out = []
+    for d in (m.line_b[ok] - pred_l[keep][ok], m.col_b[ok] - pred_c[keep][ok]):
+        med = line_median(lk, d, np.ones(d.size, dtype=bool), n_lines)
+        med[few] = np.nan
+        have = np.flatnonzero(np.isfinite(med))
+        out.append(np.interp(np.arange(n_lines), have, med[have]) if have.size else np.zeros(n_lines))
+    return out[0], out[1]
+
+
+
+
+@dataclass
+class Candidates:
+    """Points selected in band ``ahead`` and their knowledge prediction in band ``behind`` [px]."""
+
+    ahead: str
+    behind: str
+    nominal_tau_s: float
+    line_a: np.ndarray
+    col_a: np.ndarray
+    pred_line_b: np.ndarray
+    pred_col_b: np.ndarray
+
+    @property
+    def name(self) -> str:
+        return f"{self.ahead}/{self.behind}"
+
+
+def select_candidates(img_a: np.ndarray, shape_b: tuple, ahead: str, behind: str, settings: RestorationSettings,
+                      sm) -> Candidates:
+    """Select points in band ``ahead`` (a-priori criterion) and predict them in ``behind`` with the knowledge.
+
+    Only lines whose homologues fall inside band B (with the matcher's support
+    margin) are used; points predicted outside B are dropped.
+    """
+    n_lines = img_a.shape[0]
+    tau = sm.nominal_delay_s(ahead, behind)
+    shift_lines = tau / sm.instrument.line_period_s
+    ml, mc = support_margin(window=settings.window, search=settings.search)
+    usable = np.zeros(n_lines, dtype=bool)
+    lo = ml + 1
+    hi = int(np.floor(n_lines - 1 - shift_lines - ml - 2))
+    if hi <= lo:
+        raise RestorationError(f"pair {ahead}/{behind}: image too short ({n_lines} lines) for a delay of "
+                               f"{shift_lines:.1f} lines")
+    usable[lo:hi] = True
+    lines_a, cols_a = select_points_in_blocks(img_a, method=settings.selection,
+                                              per_line=settings.points_per_line, window=settings.window,
+                                              search=settings.search, margin=(ml, mc), line_mask=usable,
+                                              max_std=settings.texture_max_std_px)
+    if lines_a.size == 0:
+        return Candidates(ahead, behind, tau, lines_a, cols_a, lines_a.copy(), cols_a.copy())
+    g = sm.direct_location(ahead, lines_a, cols_a)
+    pl, pc = sm.inverse_location(behind, g)
+    nb_cols = shape_b[1]
+    inside = np.isfinite(pl) & np.isfinite(pc) & (pl > ml) & (pl < n_lines - 1 - ml) & (pc > mc) & \
+        (pc < nb_cols - 1 - mc)
+    return Candidates(ahead, behind, tau, lines_a[inside], cols_a[inside], pl[inside], pc[inside])
+
+
+def match_candidates(img_a: np.ndarray, img_b: np.ndarray, cand: Candidates, settings: RestorationSettings
+                     ) -> PairData:
+    """Match the candidates in band B, each search centred on the pilot's per-line shift.
+
+    The residuals stay relative to the knowledge prediction (``pred_*``).
+    """
+    n_lines = img_a.shape[0]
+    lines_a, cols_a, pl, pc = cand.line_a, cand.col_a, cand.pred_line_b, cand.pred_col_b
+    if lines_a.size == 0:
+        return PairData(name=cand.name, ahead=cand.ahead, behind=cand.behind, tau_s=cand.nominal_tau_s,
+                        line_a=lines_a, col_a=cols_a, meas_line_b=lines_a.copy(), meas_col_b=cols_a.copy(),
+                        quality=lines_a.copy(), valid=np.zeros(0, dtype=bool), nominal_tau_s=cand.nominal_tau_s)
+    sh_l, sh_c = pilot_shift(img_a, img_b, lines_a, cols_a, pl, pc, n_lines, settings)
+    li = np.clip(np.rint(lines_a).astype(np.int64), 0, n_lines - 1)
+    m = match_points(img_a, img_b, lines_a, cols_a, pl + sh_l[li], pc + sh_c[li], window=settings.window,
+                     search=settings.search, method=settings.match_method, min_quality=settings.min_quality)
+    return PairData(name=cand.name, ahead=cand.ahead, behind=cand.behind, tau_s=cand.nominal_tau_s, line_a=lines_a,
+                    col_a=cols_a, meas_line_b=m.line_b, meas_col_b=m.col_b, quality=m.quality,
+                    valid=np.asarray(m.valid, bool), pred_line_b=pl, pred_col_b=pc,
+                    std_line=np.asarray(m.std_line, float), std_col=np.asarray(m.std_col, float),
+                    nominal_tau_s=cand.nominal_tau_s)
+
+
+def match_pair(product: Product, ahead: str, behind: str, settings: RestorationSettings, sm=None) -> PairData:
+    """Select points in band ``ahead``, predict them in ``behind``, match them."""
+    sm = sm or product.sensor_model()
+    img_a = product.image(ahead)
+    img_b = product.image(behind)
+    cand = select_candidates(img_a, img_b.shape, ahead, behind, settings, sm)
+    return match_candidates(img_a, img_b, cand, settings)
+
+
+# --------------------------------------------------------------------------- synthesise
+def synthesise_pair(pair: PairData, sm, settings: RestorationSettings, n_lines: int, *, sens=None) -> PairData:
+    """Instant synthesis of one pair with the sensor model ``sm`` (the current attitude).
+
+    Returns a new :class:`PairData` with the prediction of the valid matches in
+    band B, the sensitivities (``sens`` when given: computed once, on the first
+    iteration), the inliers, the synthesis and the actual delay τ′ (median over
+    the points of the predicted line offset × line period: off nadir, over
+    relief or with pitch, τ′ differs from the nominal delay).
+    """
+    v = pair.valid
+    la, ca = pair.line_a[v], pair.col_a[v]
+    g = sm.direct_location(pair.ahead, la, ca)
+    pl, pc = sm.inverse_location(pair.behind, g)
+    if sens is None:
+        sens = sm.sensitivities(pair.behind, g)
+    pred_l = np.full(v.shape, np.nan)
+    pred_c = np.full(v.shape, np.nan)
+    pred_l[v], pred_c[v] = pl, pc
+    if pair.std_line is not None:
+        # inverse variance of each matched coordinate (matcher's estimate, floored)
+        floor = 0.02
+        w = np.stack([1.0 / (pair.std_line[v] ** 2 + floor ** 2), 1.0 / (pair.std_col[v] ** 2 + floor ** 2)], axis=1)
+    else:
+        w = np.clip(pair.quality[v], 0.05, 1.0) ** 2
+    res = instant_synthesis(np.rint(la).astype(np.int64), pair.meas_line_b[v] - pl, pair.meas_col_b[v] - pc, sens,
+                            n_lines=n_lines, weights=w, axes=settings.axes, min_points=settings.min_points_per_line,
+                            n_sigma=settings.n_sigma)
+    inl = np.zeros(v.shape, dtype=bool)
+    inl[v] = res.inlier
+    tau_pts = (pl - la) * sm.instrument.line_period_s
+    tau = float(np.median(tau_pts)) if tau_pts.size else pair.tau_s
+    return replace(pair, pred_line_b=pred_l, pred_col_b=pred_c, sens=sens, inlier=inl, synthesis=res, tau_s=tau,
+                   residual_rms_px=float(res.residual_rms_px))
+
+
+def line_lag(pair: PairData, n_lines: int, max_gap: int) -> np.ndarray:
+    """Per-line extra delay of the pair [lines]: mean line residual of its inliers.
+
+    Band B sees a point of line l of A at t + τ + Δl·Te where Δl is the
+    measured line residual (pitch jitter changes the actual delay): the
+    differential of that line is δ(t + τ + Δl Te) − δ(t), not δ(t + τ) − δ(t).
+    """
+    inl = pair.inlier if pair.inlier is not None else pair.valid
+    li = np.rint(pair.line_a[inl]).astype(np.int64)
+    dl = (pair.meas_line_b - pair.pred_line_b)[inl]
+    ok = np.isfinite(dl)
+    n = np.bincount(li[ok], minlength=n_lines)
+    sm = np.bincount(li[ok], dl[ok], minlength=n_lines)
+    lag = np.where(n > 0, sm / np.maximum(n, 1), np.nan)
+    lag = fill_short_gaps(lag, max_gap=max(max_gap, 64))
+    return np.nan_to_num(lag)
+
+
+@dataclass
+class PairDifferentials:
+    """One pair's differentials of one iteration, as they are integrated.
+
+    ``diffs``/``sigmas``: axis → (N,) [rad] (gaps dropped/filled, window
+    compensated); ``lag_s``: extra delay per line [s]; ``weight``: relative
+    weight per line (matched points, at least ``min_points_per_line``).
+    """
+
+    tau_s: float
+    diffs: dict
+    sigmas: dict
+    lag_s: np.ndarray
+    weight: np.ndarray
+
+
+def pair_differentials(pair: PairData, settings: RestorationSettings, n_lines: int,
+                       line_period_s: float) -> PairDifferentials:
+    """Condition a synthesised pair's differentials for the integration (gaps, window, lags, weights)."""
+    res = pair.synthesis
+    diffs, sigmas = {}, {}
+    for k, a in enumerate(AXES):
+        d = drop_sparse(res.diff[:, k], half_window=max(settings.max_gap_fill_lines, 1))
+        d = fill_short_gaps(d, max_gap=settings.max_gap_fill_lines)
+        if settings.compensate_window:
+            d = window_compensation(d, window_lines=settings.window[0])
+        diffs[a] = d
+        sigmas[a] = res.sigma[:, k]
+    weight = np.where(res.n_points >= settings.min_points_per_line, res.n_points,
+                      settings.min_points_per_line).astype(np.float64)
+    lag = line_lag(pair, n_lines, settings.max_gap_fill_lines) * line_period_s
+    return PairDifferentials(tau_s=pair.tau_s, diffs=diffs, sigmas=sigmas, lag_s=lag, weight=weight)
+
+
+# --------------------------------------------------------------------------- integrate
+def integrate_differentials(axis: str, used: list, differentials: list, previous: np.ndarray,
+                            settings: RestorationSettings, line_period_s: float, *, where="") -> IntegrationRecord:
+    """Integrate one axis's differentials of the pairs ``used`` (:func:`integrate_axis`), recorded."""
+    diffs = [d.diffs[axis] for d in differentials]
+    if all(np.all(~np.isfinite(d)) for d in diffs):
+        counts = "; ".join(f"{p.name}: {int(np.count_nonzero(p.valid))} valid of {p.valid.size} candidates over "
+                           f"{previous.size} lines" for p in used)
+        raise RestorationError(
+            f"{where}: no line could be synthesised on {axis}: fewer than restoration.min_points_per_line = "
+            f"{settings.min_points_per_line} good matches on every line ({counts}); the bands are too noisy or "
+            f"too poorly textured for the a-priori criterion (restoration.texture_max_std_px = "
+            f"{settings.texture_max_std_px}) and restoration.min_quality = {settings.min_quality}")
+    taus = [d.tau_s for d in differentials]
+    lags = [d.lag_s for d in differentials]
+    sigmas = [d.sigmas[axis] for d in differentials]
+    weights = [d.weight for d in differentials]
+    res = integrate_axis(diffs, taus, line_period_s, method=settings.method, options=settings.integration_options,
+                         lags=lags, sigmas=sigmas, weights=weights, highpass_hz=settings.highpass_hz)
+    return IntegrationRecord(axis=axis, pairs=[p.name for p in used], diffs=np.array(diffs), sigmas=np.array(sigmas),
+                             taus=np.array(taus), lags_s=np.array(lags), weights=np.array(weights),
+                             line_period_s=line_period_s, method=res.method.name, options=res.options,
+                             highpass_hz=settings.highpass_hz, spectrum=res.spectrum, increment=res.theta,
+                             previous=np.nan_to_num(previous))
+
+
+# --------------------------------------------------------------------------- anchor
+def remove_mean(estimate: dict, axes) -> dict:
+    """The correction with its (unobservable) mean removed on the restored axes."""
+    out = dict(estimate)
+    for a in axes:
+        m = np.isfinite(out[a])
+        if m.any():
+            out[a] = out[a] - np.mean(out[a][m])
+    return out
+
+
+def anchor_on_star_tracker(restored: dict, t_line: np.ndarray, star_tracker, axes) -> tuple[dict, bool]:
+    """Absolute anchoring: shift each restored axis by its mean offset to the star-tracker samples.
+
+    Returns the anchored attitude and whether any axis was anchored.
+    """
+    out = dict(restored)
+    anchored = False
+    if star_tracker is None:
+        return out, anchored
+    for a in axes:
+        m = np.isfinite(out[a])
+        sel = (star_tracker.time >= t_line[m].min()) & (star_tracker.time <= t_line[m].max()) if m.any() \
+            else np.zeros(0, bool)
+        if sel.sum() >= 1:
+            r_at = np.interp(star_tracker.time[sel], t_line[m], out[a][m])
+            out[a] = out[a] + float(np.mean(getattr(star_tracker, a)[sel] - r_at))
+            anchored = True
+    return out, anchored
+
+
+def check_coverage(restored: dict, settings: RestorationSettings, where) -> dict:
+    """Fraction of lines restored per axis; refuses a restored axis below ``min_coverage``."""
+    coverage = {a: float(np.mean(np.isfinite(restored[a]))) for a in AXES}
+    for a in settings.axes:
+        if coverage[a] < settings.min_coverage:
+            raise RestorationError(f"{where}: coverage on {a} is {coverage[a] * 100:.1f} % "
+                                   f"(< restoration.min_coverage = {settings.min_coverage * 100:.0f} %): "
+                                   "not enough texture to restore")
+    return coverage
+
+
+# --------------------------------------------------------------------------- correct
+def correct_images(product: Product, t_line, restored: dict, knowledge: dict, pairs: list,
+                   settings: RestorationSettings, *, path=None, attrs=None) -> tuple:
+    """Bands resampled with the restored attitude, and the band-to-band misregistration before / after.
+
+    Lines without restoration keep the knowledge. Returns ``(corrected, misregistration)``.
+    """
+    rest_fill = {a: np.where(np.isfinite(restored[a]), restored[a], knowledge[a]) for a in AXES}
+    valid = np.all([np.isfinite(restored[a]) for a in settings.axes], axis=0)
+    corrected = correct_bands(product, restored=attitude_series(t_line, rest_fill), valid=valid,
+                              column_step=settings.correction_column_step, path=path, attrs=attrs)
+    return corrected, misregistration(product, corrected, pairs, settings)
+
+
+def attitude_series(time, values: dict) -> AttitudeSeries:
+    """An :class:`~simsat.attitude.AttitudeSeries` from axis → samples [rad] at ``time`` [s]."""
+    return AttitudeSeries(time=np.asarray(time, dtype=np.float64), roll=np.asarray(values["roll"], dtype=np.float64),
+                          pitch=np.asarray(values["pitch"], dtype=np.float64),
+                          yaw=np.asarray(values["yaw"], dtype=np.float64))
+
+
+def ncc_kernel_cold() -> bool:
+    """Whether the compiled NCC kernel is not loaded yet in this process (first use: cache load or compile)."""
+    from ._ncc_kernel import match_ncc  # Numba: heavy, imported only when matching with it
+
+    return not match_ncc.signatures
