@@ -195,7 +195,7 @@ def bench_scaling(*, scenario: str = "phr_cmg", sizes=(1000, 2000), known: dict 
 
 _PEAK_SNIPPET = (
     "import resource, sys\n"
-    "from simsat.cli import main\n"
+    "from simsat_cli import main\n"
     "rc = main(sys.argv[1:])\n"
     "print('SIMSAT_PEAK_KB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\n"
     "sys.exit(rc)\n")
@@ -208,7 +208,7 @@ def _measured_command(argv: list) -> dict:
     wall = _time.perf_counter() - t0
     peak = [ln for ln in p.stderr.splitlines() if ln.startswith("SIMSAT_PEAK_KB")]
     if p.returncode != 0 or not peak:
-        from simsat.cli import CliError
+        from simsat_cli import CliError
 
         said = [ln for ln in p.stderr.splitlines() if ln.strip() and not ln.startswith("SIMSAT_PEAK_KB")]
         raise CliError(f"bench memory: simsat {' '.join(argv)} failed (exit {p.returncode}): "

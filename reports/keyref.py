@@ -145,14 +145,14 @@ def _norm(key: str) -> str:
 
 
 def _record(raw: dict) -> list:
-    from restore.pipeline import restoration_settings
+    """Keys read by the scenario's validation pass (every registered table, [restoration] included)."""
+    import restore  # noqa: F401  (registers [restoration])
     from simsat import config
     from simsat.scenario import load_scenario
 
     rec = config.record_keys(True)
     try:
-        sc = load_scenario(raw)
-        restoration_settings(sc.section("restoration"))
+        load_scenario(raw)
     finally:
         config.record_keys(False)
     return rec

@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from simsat.config import ScenarioError, Section
+from simsat.validation import register_table_check
 
 from .integration import check_options, integration_method
 from .synthesis import AXES
@@ -107,3 +108,6 @@ def settings_dict(s: RestorationSettings) -> dict:
     d["search"] = list(s.search)
     d["axes"] = list(s.axes)
     return d
+
+
+register_table_check("restoration", restoration_settings)

@@ -21,6 +21,7 @@ import numpy as np
 from .config import ScenarioError, Section
 from .instrument import Instrument, instrument_from_config
 from .platform import Platform, platform_from_config
+from .validation import run_table_checks
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -325,6 +326,7 @@ def _build(raw: dict, path: Path | None, base_dir: Path) -> Scenario:
                   acquisition=acquisition, raw=raw, source=path, base_dir=base_dir,
                   x_range_m=(float(xs.min() - margin), float(xs.max() + margin)),
                   y_range_m=(float(min(ys) - margin), float(max(ys) + margin)), requirement=requirement)
+    run_table_checks(sc)  # the tables of later stages (restore registers [restoration])
     return sc
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from simsat import cli
+import simsat_cli as cli
 
 
 @pytest.fixture(scope="module")

@@ -24,7 +24,7 @@ import time
 
 import pytest
 
-from simsat import cli
+import simsat_cli as cli
 from simsat.config import ScenarioError
 from simsat.scenario import builtin_scenarios, load_scenario, _read_toml
 

@@ -99,7 +99,7 @@ def test_flat_product_ends_with_a_clear_message(tiny_restored, tmp_path):
     ds.to_netcdf(flat / "product.nc")
     with pytest.raises(RestorationError, match="no usable texture"):
         restore_run(flat, progress=False)
-    p = subprocess.run([sys.executable, "-m", "simsat.cli", "restore", str(flat), "--quiet"], capture_output=True,
+    p = subprocess.run([sys.executable, "-m", "simsat_cli", "restore", str(flat), "--quiet"], capture_output=True,
                        text=True)
     assert p.returncode == 2
     assert "Traceback" not in p.stderr and "no usable texture" in p.stderr
@@ -111,7 +111,7 @@ def test_noise_without_signal_ends_with_a_clear_message(tmp_path):
     d = tmp_path / "noisy"
     simulate(load_scenario("tiny", overrides={"instrument": {"noise": {"read_noise_e": 3000.0,
                                                                        "signal_fraction": 0.1}}}), d, progress=False)
-    p = subprocess.run([sys.executable, "-m", "simsat.cli", "restore", str(d), "--quiet"], capture_output=True,
+    p = subprocess.run([sys.executable, "-m", "simsat_cli", "restore", str(d), "--quiet"], capture_output=True,
                        text=True)
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert "no usable texture" in p.stderr and "restoration.texture_max_std_px" in p.stderr
@@ -119,7 +119,7 @@ def test_noise_without_signal_ends_with_a_clear_message(tmp_path):
 
 
 def test_missing_product_and_bad_settings_are_named(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "simsat.cli", "restore", str(tmp_path), "--quiet"], capture_output=True,
+    p = subprocess.run([sys.executable, "-m", "simsat_cli", "restore", str(tmp_path), "--quiet"], capture_output=True,
                        text=True)
     assert p.returncode == 2 and "product.nc" in p.stderr and "Traceback" not in p.stderr
     with pytest.raises(ScenarioError, match="restoration.window_lines: must be odd"):

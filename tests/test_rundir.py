@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from simsat import cli
+import simsat_cli as cli
 from simsat.config import ScenarioError
 from simsat.rundir import (RunDirError, RunLock, check_consistency, clean_stale_parts, content_id,
                            is_simsat_run, prepare_output_dir, read_ids)

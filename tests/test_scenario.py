@@ -113,11 +113,11 @@ def test_cli_validate_reports_one_line_without_traceback(tmp_path):
     # write TOML by hand (no TOML writer in the stdlib)
     text = BUILTIN["tiny"].read_text().replace("line_period_ms = 0.4", "line_period_ms = -1")
     bad.write_text(text)
-    p = subprocess.run([sys.executable, "-m", "simsat.cli", "validate", str(bad)], capture_output=True, text=True)
+    p = subprocess.run([sys.executable, "-m", "simsat_cli", "validate", str(bad)], capture_output=True, text=True)
     assert p.returncode == 2
     assert "Traceback" not in p.stderr
     assert p.stderr.count("\n") == 1
     assert "instrument.line_period_ms: must be >= 0.001" in p.stderr and str(bad) in p.stderr
-    ok = subprocess.run([sys.executable, "-m", "simsat.cli", "validate", "tiny"], capture_output=True, text=True)
+    ok = subprocess.run([sys.executable, "-m", "simsat_cli", "validate", "tiny"], capture_output=True, text=True)
     assert ok.returncode == 0, ok.stderr
     assert "OK" in ok.stdout

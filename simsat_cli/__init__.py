@@ -1,17 +1,36 @@
-"""The ``simsat`` command line.
+"""The ``simsat`` command line: the application shell at the top of the stack.
 
-simsat's library modules know nothing of restoration or reports; this module
-is the application shell that chains them, so it imports ``restore`` and
-``reports`` lazily, inside the commands that need them.
+It sits above the three packages it chains — ``simsat`` (scenario, render,
+product), ``restore`` and ``reports`` — none of which imports it. Importing
+``restore`` registers the ``[restoration]`` table in the scenario's single
+validation pass (:mod:`simsat.validation`). ``reports`` (matplotlib, PyVista)
+is imported by the commands that draw, to keep ``simsat validate`` and
+``simsat --help`` fast.
 """
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import re
+import subprocess
 import sys
 import time
 from pathlib import Path
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10: the backport the package declares
+    import tomli as tomllib
+
+import restore.settings  # noqa: F401  (registers [restoration] in the validation pass)
+from restore.pipeline import restore_run
+from simsat import __version__
+from simsat.config import ScenarioError
+from simsat.product import ProductError, atomic_write_json
+from simsat.rundir import REPORT_MANIFEST, RunLock, check_consistency, read_ids
+from simsat.scenario import builtin_scenarios, load_scenario
+from simsat.simulate import simulate
 
 __all__ = ["main"]
 
@@ -26,11 +45,6 @@ def _print_err(msg: str) -> None:
 
 def _parse_set(items: list[str] | None) -> dict:
     """``--set key.sub=value`` overrides (value parsed as TOML)."""
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10: the backport the package declares
-        import tomli as tomllib
-
     out: dict = {}
     for item in items or []:
         if "=" not in item:
@@ -57,7 +71,6 @@ def _parse_set(items: list[str] | None) -> dict:
 
 # --------------------------------------------------------------------------- commands
 def cmd_scenarios(args) -> int:
-    from .scenario import builtin_scenarios, load_scenario
 
     for name, path in builtin_scenarios().items():
         try:
@@ -72,30 +85,17 @@ def cmd_scenarios(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from .scenario import load_scenario
 
-    sc = load_scenario(args.scenario, overrides=_parse_set(args.set))
-    _validate_later_stages(sc)
+    sc = load_scenario(args.scenario, overrides=_parse_set(args.set))  # every table, every stage
     d = sc.instrument.detectors
     print(f"{sc.source or args.scenario}: OK — {sc.name}: {sc.acquisition.lines} lines x {d[0].pixels} px, "
           f"{len(d)} bands ({', '.join(x.name for x in d)}), scene x ∈ [{sc.x_range_m[0]:.0f}, {sc.x_range_m[1]:.0f}] m")
     return 0
 
 
-def _validate_later_stages(sc) -> None:
-    try:
-        from restore.pipeline import restoration_settings
-    except ImportError:  # pragma: no cover
-        return
-    restoration_settings(sc.section("restoration"))
-
-
 def cmd_render(args) -> int:
-    from .scenario import load_scenario
-    from .simulate import simulate
 
     sc = load_scenario(args.scenario, overrides=_parse_set(args.set))
-    _validate_later_stages(sc)
     out = Path(args.out) if args.out else Path("runs") / sc.name
     res = simulate(sc, out, progress=not args.quiet, force=args.force)
     _say_replaced(out, res.replaced)
@@ -115,8 +115,6 @@ def _report(run_dir: Path, out_dir, *, quiet: bool) -> Path:
     """Write the report of a run while holding its lock; refuse a run of mixed files."""
     from reports.run_report import make_run_report
 
-    from .product import ProductError
-    from .rundir import RunLock, check_consistency
 
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
@@ -135,8 +133,6 @@ def _report(run_dir: Path, out_dir, *, quiet: bool) -> Path:
 
 def _write_report_manifest(report_dir: Path, *, since_ns: int, run_dir: Path) -> None:
     """List the files this report wrote (so a later render removes exactly those, and nothing of the user's)."""
-    from .product import atomic_write_json
-    from .rundir import REPORT_MANIFEST, read_ids
 
     files = sorted(e.name for e in os.scandir(report_dir)
                    if e.is_file(follow_symlinks=False) and not e.name.startswith(".")
@@ -153,7 +149,6 @@ def _summary(run_dir: Path, report_path=None) -> str:
 
 
 def cmd_restore(args) -> int:
-    from restore.pipeline import restore_run
 
     res = restore_run(args.run_dir, overrides=_parse_set(args.set), progress=not args.quiet)
     if not args.quiet:
@@ -176,12 +171,8 @@ def cmd_run(args) -> int:
     process per stage gives each its own memory, so the peak of the whole run
     is that of its largest stage, not their sum of leftovers.
     """
-    import subprocess
-
-    from .scenario import load_scenario
 
     sc = load_scenario(args.scenario, overrides=_parse_set(args.set))
-    _validate_later_stages(sc)  # every key checked before anything starts
     out = Path(args.out) if args.out else Path("runs") / sc.name
     sets = [x for item in (args.set or []) for x in ("--set", item)]
     quiet = ["--quiet"] if args.quiet else []
@@ -189,7 +180,7 @@ def cmd_run(args) -> int:
               ["restore", str(out), "--no-summary", *quiet],
               ["report", str(out), *quiet]]
     for argv in stages:
-        rc = subprocess.run([sys.executable, "-m", "simsat.cli", *argv]).returncode
+        rc = subprocess.run([sys.executable, "-m", "simsat_cli", *argv]).returncode
         if rc != 0:
             return rc
     print(_summary(out, report_path=out / "report" / "index.html"))
@@ -218,7 +209,6 @@ def cmd_bench(args) -> int:
 # --------------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="simsat", description="Push-broom LOS jitter simulator and restoration testbed")
-    from . import __version__
     p.add_argument("--version", action="version", version=f"simsat {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
@@ -292,7 +282,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _os_hint(e: OSError) -> str:
-    import errno
 
     hints = {errno.EEXIST: " (a file is in the way where a directory is needed)",
              errno.ENOTDIR: " (a path component is a file, not a directory)",
@@ -310,8 +299,6 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    from .config import ScenarioError
-    from .product import ProductError
 
     try:
         return int(args.func(args) or 0)

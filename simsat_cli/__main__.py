@@ -1,0 +1,6 @@
+"""``python -m simsat_cli``: the ``simsat`` command."""
+import sys
+
+from simsat_cli import main
+
+sys.exit(main())
