@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from simsat.units import AXES
+
 __all__ = ["error_stats", "attitude_errors", "truth_at", "attitude_misregistration", "misregistration_floor"]
 
-AXES = ("roll", "pitch", "yaw")
 
 
 def error_stats(error, *, ifov_rad: float) -> dict:

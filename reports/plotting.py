@@ -9,8 +9,8 @@ CSV.
 from __future__ import annotations
 
 import csv
+import io
 import os
-import tempfile
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
@@ -18,10 +18,11 @@ import matplotlib
 
 matplotlib.use("Agg")  # before pyplot: files only, never a window
 
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+
+from simsat.product import atomic_write_bytes  # noqa: E402
 
 __all__ = [
     "STYLE",
@@ -33,7 +34,6 @@ __all__ = [
     "plot_mc_points",
     "legend_below",
     "legend_right",
-    "atomic_write_bytes",
     "save_figure",
     "write_table_csv",
     "read_table_csv",
@@ -178,42 +178,11 @@ def plot_mc_points(ax: Axes, x, y, yerr, *, color: str, label: str | None,
                        color=color, label=label, zorder=6)
 
 
-# ---------------------------------------------------------------------------
-# Atomic file writing
-# ---------------------------------------------------------------------------
-
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (temp file in the same folder + os.replace)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    return path
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 def save_figure(fig: Figure, path: str | os.PathLike) -> Path:
     """Save ``fig`` as PNG at ``path`` atomically."""
-    import io
-
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
-    return atomic_write_bytes(path, buf.getvalue())
+    return atomic_write_bytes(buf.getvalue(), path)
 
 
 def _fmt(v) -> str:
@@ -232,8 +201,6 @@ def write_table_csv(path: str | os.PathLike, table: Mapping[str, Iterable]) -> P
     Floats are written with full precision (``repr``); NaN is written as an empty
     field.
     """
-    import io
-
     names = list(table)
     cols = [list(table[n]) for n in names]
     lengths = {len(c) for c in cols}
@@ -245,7 +212,7 @@ def write_table_csv(path: str | os.PathLike, table: Mapping[str, Iterable]) -> P
     w.writerow(names)
     for row in zip(*cols):
         w.writerow([_fmt(v) for v in row])
-    return atomic_write_bytes(path, buf.getvalue().encode("utf-8"))
+    return atomic_write_bytes(buf.getvalue().encode("utf-8"), path)
 
 
 def read_table_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:

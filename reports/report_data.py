@@ -31,13 +31,15 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from simsat.units import AXES
+
 from reports.metrics import error_stats, misregistration_floor, truth_at
 from restore.integration.methods import integration_method
 from restore.restoration_io import check_restoration, open_restoration, result_from_dataset
-from simsat.product import ProductError, read_product
+from simsat.product import ProductError, read_product, read_truth
 
 __all__ = [
-    "AXES", "RunData", "load_run", "read_product_light", "get_integrator", "scenario_summary", "restored_axes",
+    "AXES", "RunData", "load_run", "get_integrator", "scenario_summary", "restored_axes",
     "attitude_table", "headline", "minmax_decimate", "zoom_window", "longest_finite_run", "welch_settings",
     "spectra", "integration_probe", "measured_transfer", "analytic_chain_gain", "analytic_joint_gain",
     "regularisation_k", "true_differentials", "line_lags", "integration_record", "error_budget", "frozen_chain_gain", "probe_window_gain",
@@ -45,7 +47,6 @@ __all__ = [
     "scene_geometry", "pair_file_tag",
 ]
 
-AXES = ("roll", "pitch", "yaw")
 
 
 # =============================================================================
@@ -61,7 +62,7 @@ class RunData:
     run_dir : Path
     product : simsat.product.Product
         Geometry, knowledge and DEM (images are *not* loaded: see
-        :func:`read_product_light`).
+        :attr:`simsat.product.Product.image_shapes`).
     image_shapes : dict
         ``{band: (lines, columns)}``.
     restoration : xarray.Dataset or None
@@ -134,104 +135,6 @@ class RunData:
         return [float(t) for t in np.atleast_1d(self.restoration["tau_s"].values)]
 
 
-def read_product_light(path) -> tuple:
-    """Read a product's geometry, knowledge and DEM without its images.
-
-    ``simsat.product.read_product`` decompresses every band image (hundreds of
-    MB on a full-size product); the report only needs the sensor model. This
-    opens ``product.nc`` lazily, drops the ``image_*`` variables and builds the
-    same :class:`simsat.product.Product` (tests check that its sensor model
-    agrees with ``read_product``'s).
-
-    Returns
-    -------
-    product : simsat.product.Product
-    image_shapes : dict
-        ``{band: (lines, columns)}``.
-    """
-    import xarray as xr
-
-    from simsat.attitude import AttitudeSeries
-    from simsat.instrument import Detector, Instrument, Radiometry
-    from simsat.platform import Platform
-    from simsat.product import Product, ProductError, check_product
-    from simsat.terrain import Dem
-
-    p = Path(path)
-    if p.is_dir():
-        p = p / "product.nc"
-    if not p.exists():
-        raise ProductError(f"{p}: product file not found (run `simsat render SCENARIO --out DIR` first)")
-    try:
-        with xr.open_dataset(p, engine="netcdf4") as lazy:
-            check_product(lazy, p)
-            img = [v for v in lazy.data_vars if str(v).startswith("image_")]
-            shapes = {str(v)[len("image_"):]: tuple(int(n) for n in lazy[v].shape) for v in img}
-            ds = lazy.drop_vars(img).load()
-    except ProductError:
-        raise
-    except Exception as e:
-        raise ProductError(f"{p}: cannot read as NetCDF ({type(e).__name__}: {e})") from None
-    try:
-        a = ds.attrs
-        dets = []
-        for i, name in enumerate([str(s) for s in ds["detector"].values]):
-            dets.append(Detector(name=name, band=str(ds["detector_band"].values[i]),
-                                 along_m=float(ds["detector_along_m"].values[i]),
-                                 across_m=float(ds["detector_across_m"].values[i]),
-                                 pixels=int(ds["detector_pixels"].values[i]),
-                                 pitch_m=float(ds["detector_pitch_m"].values[i])))
-        inst = Instrument(focal_length_m=float(a["focal_length_m"]), line_period_s=float(a["line_period_s"]),
-                          detectors=tuple(dets), mtf_nyquist=float(a.get("mtf_nyquist", 1.0)),
-                          radiometry=Radiometry(bits=int(a.get("bits", 12))))
-        plat = Platform(altitude_m=float(a["altitude_m"]), ground_speed_m_s=float(a["ground_speed_m_s"]),
-                        x_at_t0_m=float(a["platform_x_at_t0_m"]), y_m=float(a["platform_y_m"]),
-                        off_nadir_roll_rad=float(a.get("off_nadir_roll_rad", 0.0)),
-                        off_nadir_pitch_rad=float(a.get("off_nadir_pitch_rad", 0.0)))
-        kn = AttitudeSeries(time=np.asarray(ds["knowledge_time"].values, dtype=np.float64),
-                            roll=np.asarray(ds["knowledge_roll"].values, dtype=np.float64),
-                            pitch=np.asarray(ds["knowledge_pitch"].values, dtype=np.float64),
-                            yaw=np.asarray(ds["knowledge_yaw"].values, dtype=np.float64))
-        dem = Dem(x0_m=float(ds["dem_x"].values[0]), y0_m=float(ds["dem_y"].values[0]),
-                  dx_m=float(a["dem_dx_m"]), dy_m=float(a["dem_dy_m"]),
-                  z=np.asarray(ds["dem"].values, dtype=np.float64))
-        st = None
-        if "star_tracker_time" in ds:
-            st = AttitudeSeries(time=np.asarray(ds["star_tracker_time"].values, dtype=np.float64),
-                                roll=np.asarray(ds["star_tracker_roll"].values, dtype=np.float64),
-                                pitch=np.asarray(ds["star_tracker_pitch"].values, dtype=np.float64),
-                                yaw=np.asarray(ds["star_tracker_yaw"].values, dtype=np.float64))
-    except KeyError as e:
-        raise ProductError(f"{p}: malformed product, missing {e}") from None
-    prod = Product(path=p, ds=ds, platform=plat, instrument=inst, knowledge=kn, dem=dem, star_tracker=st)
-    return prod, shapes
-
-
-def _read_truth_checked(path: Path, product_time: np.ndarray):
-    """``truth.nc`` with its axes present, finite and covering the product's lines."""
-    import xarray as xr
-
-    from simsat.product import ProductError
-
-    try:
-        truth = xr.load_dataset(path, engine="netcdf4")
-    except Exception as e:
-        raise ProductError(f"{path}: cannot read as NetCDF ({type(e).__name__}: {e})") from None
-    for name in ("time",) + AXES:
-        if name not in truth.variables:
-            raise ProductError(f"{path}: no variable {name!r} (truth needs time, roll, pitch, yaw)")
-        v = np.asarray(truth[name].values, dtype=np.float64)
-        if v.ndim != 1 or v.size < 2 or not np.isfinite(v).all():
-            raise ProductError(f"{path}: variable {name!r} must be a finite series over 'time'")
-    t = np.asarray(truth["time"].values, dtype=np.float64)
-    if np.any(np.diff(t) <= 0):
-        raise ProductError(f"{path}: variable 'time' must increase strictly")
-    if t[0] > product_time[0] + 1e-9 or t[-1] < product_time[-1] - 1e-9:
-        raise ProductError(f"{path}: truth covers [{t[0]:.6g}, {t[-1]:.6g}] s, not the product's lines "
-                           f"[{product_time[0]:.6g}, {product_time[-1]:.6g}] s: another run's truth")
-    return truth
-
-
 def load_run(run_dir) -> RunData:
     """Read a run directory: product (without images), restoration, truth, run.json.
 
@@ -242,7 +145,8 @@ def load_run(run_dir) -> RunData:
     """
     run_dir = Path(run_dir)
     notes: list = []
-    product, shapes = read_product_light(run_dir)
+    product = read_product(run_dir)  # images stay in the file (opened lazily)
+    shapes = product.image_shapes
     rest = result = None
     if (run_dir / "restoration.nc").exists():
         rest = open_restoration(run_dir / "restoration.nc")
@@ -253,7 +157,7 @@ def load_run(run_dir) -> RunData:
                      "only the product (and truth) are shown.")
     truth = None
     if (run_dir / "truth.nc").exists():
-        truth = _read_truth_checked(run_dir / "truth.nc", product.time)
+        truth = read_truth(run_dir, product_time=product.time)
     else:
         notes.append("No truth.nc (a real product): errors, spectra of truth and error, the measured transfer "
                      "and the error budget rows that need truth are left out.")

@@ -19,12 +19,12 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from reports import plotting as P  # noqa: E402
 from reports.report_data import AXES, minmax_decimate  # noqa: E402
+from simsat.units import URAD_PER_RAD  # noqa: E402
 
 __all__ = ["pair_color", "attitude_figure", "draw_attitude", "spectra_figure", "draw_spectra", "transfer_figure",
            "draw_transfer", "draw_budget", "draw_match_density", "match_density_figure", "draw_misregistration",
            "draw_scene_mpl", "scene_figure_mpl", "render_scene_pyvista", "nice_f_max"]
 
-URAD = 1e6
 AXIS_MARKERS = {"roll": "o", "pitch": "s", "yaw": "^"}
 C_TRUE, C_KNOW, C_REST, C_ERR, C_MEAS = "#000000", "#E69F00", "#0072B2", "#D55E00", "#8E0152"
 
@@ -51,7 +51,7 @@ def nice_f_max(freq, psd, fs: float, *, fraction: float = 0.995, floor_hz: float
 
 def _px_axis(ax, ifov_rad: float, label: str = "px"):
     """Secondary y axis in pixels for an axis drawn in µrad (``ifov_rad``: the angle of one pixel)."""
-    k = ifov_rad * URAD
+    k = ifov_rad * URAD_PER_RAD
     sec = ax.secondary_yaxis("right", functions=(lambda u: u / k, lambda p: p * k))
     sec.set_ylabel(label, fontsize=9)
     sec.tick_params(labelsize=8)
@@ -96,7 +96,7 @@ def draw_attitude(axs, att: dict, axis: str, *, ifov_rad: float, zoom: tuple, ya
             for key, label, color, lw in series:
                 if key not in att:
                     continue
-                y = att[key] * URAD
+                y = att[key] * URAD_PER_RAD
                 if col == 0:
                     xs, ys = minmax_decimate((t - t0) * 1e3, y, max_points)
                 else:
@@ -153,7 +153,7 @@ def draw_spectra(axs, spec: dict, *, taus, pair_names, f_max: float, axes=AXES):
         for key, label, color, ls in styles:
             k = f"psd_{key}_{a}"
             if k in spec and np.nanmax(spec[k][sel], initial=0.0) > 0:
-                ax.semilogy(f[sel], spec[k][sel] * URAD ** 2, color=color, ls=ls, lw=1.1, label=label)
+                ax.semilogy(f[sel], spec[k][sel] * URAD_PER_RAD ** 2, color=color, ls=ls, lw=1.1, label=label)
         _mark_pairs(ax, taus, pair_names, f_max)
         ax.set_ylabel(f"{a} PSD\n[µrad²/Hz]")
         if f"psd_correction_{a}" in spec and not np.nanmax(spec[f"psd_correction_{a}"], initial=0.0) > 0:

@@ -33,6 +33,8 @@ import numpy as np
 from reports import plotting as P
 from reports import report_data as D
 from reports import report_plots as RP
+from simsat.product import atomic_write_bytes, atomic_write_json
+from simsat.units import URAD_PER_RAD
 
 __all__ = ["make_run_report"]
 
@@ -62,7 +64,6 @@ def _thumbnail(png: bytes, *, max_width: int = THUMB_WIDTH, colors: int = 128) -
         return data if len(data) < len(png) else png
     except Exception:  # pragma: no cover - an unreadable PNG is embedded as it is
         return png
-URAD = 1e6
 
 
 # ----------------------------------------------------------------------------- small helpers
@@ -88,18 +89,6 @@ def _fmt(v, digits: int = 4) -> str:
 
 def _e(s) -> str:
     return html.escape(str(s))
-
-
-def _json_default(o):
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    if isinstance(o, (np.bool_,)):
-        return bool(o)
-    return str(o)
 
 
 class _Page:
@@ -128,7 +117,7 @@ class _Page:
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=DPI)
         data = buf.getvalue()
-        P.atomic_write_bytes(self.out_dir / name, data)
+        atomic_write_bytes(data, self.out_dir / name)
         self.files.append(name)
         b64 = base64.b64encode(_thumbnail(data)).decode("ascii")
         style = f' style="max-width:{width}px"' if width else ""
@@ -178,7 +167,7 @@ def _summary_section(pg: _Page, run: D.RunData, sc: dict, hd: dict, report_notes
     desc = f" — {_e(sc['description'])}" if sc.get("description") else ""
     pg.para(f"<b>Scenario</b> <code>{_e(sc['name'])}</code>{desc}<br>"
             f"{sc['lines']:,} lines × {sc['columns']:,} columns, line period {sc['line_period_s'] * 1e3:.3f} ms "
-            f"({sc['duration_s']:.3f} s); reference band {_e(sc['reference_band'])}, 1 px = {ifov * URAD:.3f} µrad."
+            f"({sc['duration_s']:.3f} s); reference band {_e(sc['reference_band'])}, 1 px = {ifov * URAD_PER_RAD:.3f} µrad."
             f"<br><b>Bands</b> (along-track position): {_e(bands)}"
             f"<br><b>Pairs</b> {'used by the restoration' if run.restoration is not None else '(nominal delays)'}: "
             f"{_e(pairs) or '—'}")
@@ -257,7 +246,7 @@ def _attitude_section(pg: _Page, run: D.RunData, sc: dict, hd: dict):
         for k in ("true", "knowledge", "restored", "correction", "delta", "error", "knowledge_error"):
             key = f"{k}_{a}"
             if key in att:
-                table[f"{key}_urad"] = att[key] * URAD
+                table[f"{key}_urad"] = att[key] * URAD_PER_RAD
     link = pg.csv("attitude.csv", table)
     for a in D.AXES:
         fig, axs = RP.attitude_figure()
@@ -298,7 +287,7 @@ def _spectra_section(pg: _Page, run: D.RunData, sc: dict) -> float:
     RP.draw_spectra(axs, spec, taus=taus, pair_names=names, f_max=f_max)
     table = {"freq_hz": spec["freq_hz"]}
     for k in sorted(k for k in spec if k.startswith("psd_")):
-        table[f"{k}_urad2_per_hz"] = spec[k] * URAD ** 2
+        table[f"{k}_urad2_per_hz"] = spec[k] * URAD_PER_RAD ** 2
     link = pg.csv("spectra.csv", table)
     nps = spec["nperseg"]
     span = spec.get("span_roll", (0, 0))
@@ -410,7 +399,7 @@ def _transfer_section(pg: _Page, run: D.RunData, sc: dict, f_max: float, integra
                 t2[f"gain_{a}"] = measured[f"gain_{a}"]
                 t2[f"phase_{a}_deg"] = measured[f"phase_{a}_deg"]
                 t2[f"coherence_{a}"] = measured[f"coherence_{a}"]
-                t2[f"psd_delta_{a}_urad2_per_hz"] = measured[f"psd_delta_{a}"] * URAD ** 2
+                t2[f"psd_delta_{a}_urad2_per_hz"] = measured[f"psd_delta_{a}"] * URAD_PER_RAD ** 2
                 t2[f"significant_{a}"] = measured[f"significant_{a}"].astype(int)
         links.append(pg.csv("transfer_measured.csv", t2))
     cap = ("Chain gain |θ̂/θ| per restored axis. Solid lines: the integration actually used "
@@ -640,7 +629,7 @@ def _render_pyvista_subprocess(scene: dict, png: Path, *, timeout_s: float):
             msg = (r.stderr or r.stdout or "").strip().splitlines()
             msg = [m for m in msg if m.strip()]
             raise RuntimeError(msg[-1] if msg else f"exit status {r.returncode}")
-        P.atomic_write_bytes(png, out.read_bytes())
+        atomic_write_bytes(out.read_bytes(), png)
 
 
 # ----------------------------------------------------------------------------- entry point
@@ -743,8 +732,7 @@ def make_run_report(run_dir, *, out_dir=None, integrator: Callable | None = None
                    "budget": bud.get("rows", []) if bud else [], "timings": timings,
                    "notes": run.notes + report_notes,
                    "generated": datetime.now(timezone.utc).isoformat(timespec="seconds")}
-    P.atomic_write_bytes(out / "report.json",
-                         (json.dumps(report_json, indent=2, default=_json_default) + "\n").encode())
+    atomic_write_json(report_json, out / "report.json", sort_keys=False)
     nav = " ".join(f'<a href="#{a}">{_e(ti)}</a>' for a, ti in pg.toc)
     gen = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     page = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
@@ -758,5 +746,5 @@ def make_run_report(run_dir, *, out_dir=None, integrator: Callable | None = None
             '<p class="meta">Report timings: ' + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()) + "</p>",
             "</body></html>"]
     index = out / "index.html"
-    P.atomic_write_bytes(index, "\n".join(page).encode("utf-8"))
+    atomic_write_bytes("\n".join(page).encode("utf-8"), index)
     return index

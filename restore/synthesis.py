@@ -19,9 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simsat.units import AXES
+
 __all__ = ["SynthesisResult", "instant_synthesis", "highpass_nan", "fill_short_gaps", "window_compensation"]
 
-AXES = ("roll", "pitch", "yaw")
 
 
 @dataclass

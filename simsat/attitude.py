@@ -34,17 +34,16 @@ from scipy.interpolate import CubicSpline, make_interp_spline
 from scipy.signal import butter, sosfiltfilt
 
 from simsat.config import Section
+from simsat.units import AXES, RAD_PER_URAD
 
 __all__ = [
-    "AXES", "URAD",
+    "AXES",
     "Disturbance", "HarmonicJitter", "CMGJitter", "DampedChirpJitter", "PSDJitter",
     "PolynomialDrift", "SmoothRandomProcess",
     "AttitudeModel", "AttitudeSeries", "KnowledgeConfig", "StarTrackerConfig",
     "aocs_knowledge", "star_tracker_samples", "disturbance_from_config",
 ]
 
-AXES = ("roll", "pitch", "yaw")
-URAD = 1e-6  #: one microradian in rad
 MAX_AMPLITUDE_URAD = 1e5    #: 0.1 rad (5.7°): beyond, the small-angle line-of-sight model is meaningless
 MAX_FREQUENCY_HZ = 1e5      #: far above any line rate; bounds the truth sampling
 MAX_SAMPLE_RATE_HZ = 1e4    #: AOCS knowledge / star tracker sampling
@@ -498,7 +497,7 @@ def disturbance_from_config(sec: Section, *, rng: np.random.Generator, t_start: 
     if kind == "harmonic":
         return HarmonicJitter(
             frequency_hz=sec.number("frequency_hz", gt=0, le=MAX_FREQUENCY_HZ),
-            amplitude_rad=sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * URAD,
+            amplitude_rad=sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD,
             phase_rad=math.radians(sec.number("phase_deg", 0.0)),
             drift=sec.number("drift_percent", 0.0, gt=-100) / 100,
             drift_shape=sec.string("drift_shape", "linear", choices=_DRIFT_SHAPES),
@@ -508,7 +507,7 @@ def disturbance_from_config(sec: Section, *, rng: np.random.Generator, t_start: 
         _check_list_max(sec, "exciter_frequencies_hz", fe, MAX_FREQUENCY_HZ)
         hh = sec.numbers("harmonics", [1.0], min_length=1, gt=0)
         _check_list_max(sec, "harmonics", hh, 1000.0)
-        amp = sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * URAD
+        amp = sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD
         rexc = sec.numbers("exciter_amplitude_ratios", None, length=len(fe), ge=0)
         rharm = sec.numbers("harmonic_amplitude_ratios", None, length=len(hh), ge=0)
         drift = sec.numbers("drift_percent", [0.0, 0.0], ge=0)
@@ -526,7 +525,7 @@ def disturbance_from_config(sec: Section, *, rng: np.random.Generator, t_start: 
             noise_bandwidth_hz=sec.number("noise_bandwidth_hz", 1.0, gt=0, le=MAX_FREQUENCY_HZ))
     if kind == "damped_chirp":
         return DampedChirpJitter(
-            amplitude_rad=sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * URAD,
+            amplitude_rad=sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD,
             frequency_hz=sec.number("frequency_hz", gt=0, le=MAX_FREQUENCY_HZ),
             chirp_hz_per_s=sec.number("chirp_hz_per_s", 0.0, ge=-1e5, le=1e5),
             damping_time_s=sec.number("damping_time_s", gt=0, le=1e6),
@@ -537,7 +536,7 @@ def disturbance_from_config(sec: Section, *, rng: np.random.Generator, t_start: 
         if not f_max > f_min:
             raise sec.error("f_max_hz", f"must be > f_min_hz ({f_min:g}), got {f_max:g}")
         return PSDJitter(
-            rms_rad=sec.number("rms_urad", ge=0, le=MAX_AMPLITUDE_URAD) * URAD,
+            rms_rad=sec.number("rms_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD,
             corner_hz=sec.number("corner_hz", gt=0, le=MAX_FREQUENCY_HZ), slope=sec.number("slope", 2.0, ge=0, le=10),
             f_min_hz=f_min, f_max_hz=f_max, rng=rng, t0=t_start,
             n_components=sec.integer("n_components", 400, ge=1, le=MAX_PSD_COMPONENTS))
@@ -546,7 +545,7 @@ def disturbance_from_config(sec: Section, *, rng: np.random.Generator, t_start: 
         _check_list_max(sec, "coefficients_urad", [abs(c) for c in coefs], MAX_AMPLITUDE_URAD)
         if len(coefs) > 8:
             raise sec.error("coefficients_urad", f"at most 8 coefficients (degree 7), got {len(coefs)}")
-        return PolynomialDrift(tuple(c * URAD for c in coefs), t0=t_start)
+        return PolynomialDrift(tuple(c * RAD_PER_URAD for c in coefs), t0=t_start)
     raise ValueError(f"kind: unknown {kind!r}")  # pragma: no cover - guarded by caller
 
 
@@ -849,7 +848,7 @@ def aocs_knowledge(model: AttitudeModel, *, t_start: float, t_end: float, cutoff
     sos = butter(4, cutoff_hz, fs=fs, output="sos")
     times = _sample_times(t_start, t_end, rate_hz)
     rng = _rng(seed, _STREAM_KNOWLEDGE)
-    noise = rng.standard_normal((3, times.size)) * noise_urad * URAD
+    noise = rng.standard_normal((3, times.size)) * noise_urad * RAD_PER_URAD
     vals = []
     for k, axis in enumerate(AXES):
         y = model.evaluate_axis(axis, tg)
@@ -877,6 +876,6 @@ def star_tracker_samples(model: AttitudeModel, *, t_start: float, t_end: float, 
         raise ValueError(f"noise_urad: must be >= 0, got {noise_urad}")
     times = _sample_times(t_start, t_end, rate_hz)
     rng = _rng(seed, _STREAM_STAR)
-    noise = rng.standard_normal((3, times.size)) * noise_urad * URAD
+    noise = rng.standard_normal((3, times.size)) * noise_urad * RAD_PER_URAD
     vals = [model.evaluate_axis(ax, times) + noise[k] for k, ax in enumerate(AXES)]
     return AttitudeSeries(times, *vals)

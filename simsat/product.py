@@ -22,9 +22,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import xarray as xr
 
-__all__ = ["atomic_write_dataset", "atomic_write_json", "atomic_write_bytes", "temporary_path", "Product", "read_product",
-           "read_truth", "ProductError", "NETCDF_ENCODING", "clamped_attitude", "check_product", "check_image"]
+from .attitude import AttitudeSeries
+from .instrument import Detector, Instrument, Radiometry
+from .platform import Platform
+from .sensor_model import SensorModel
+from .terrain import Dem
+from .units import AXES
+
+__all__ = ["atomic_write_dataset", "atomic_write_json", "atomic_write_bytes", "json_default", "netcdf_encoding",
+           "product_dataset", "temporary_path", "Product", "read_product",
+           "read_truth", "check_truth", "ProductError", "NETCDF_ENCODING", "clamped_attitude", "check_product", "check_image"]
 
 
 class ProductError(ValueError):
@@ -61,16 +70,17 @@ def make_tmp_dir(final: Path) -> Path:
     return d
 
 
+def netcdf_encoding(ds) -> dict:
+    """Compression of every numeric array variable of ``ds`` (:data:`NETCDF_ENCODING`)."""
+    return {k: dict(NETCDF_ENCODING) for k, v in ds.data_vars.items() if v.dtype.kind in "fiu" and v.ndim >= 1}
+
+
 def atomic_write_dataset(ds, path: str | Path, *, compress: bool = True) -> Path:
     """Write an xarray Dataset to NetCDF atomically (temp file + rename)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = _tmp_path(path)
-    enc = {}
-    if compress:
-        for k, v in ds.data_vars.items():
-            if v.dtype.kind in "fiu" and v.ndim >= 1:
-                enc[k] = dict(NETCDF_ENCODING)
+    enc = netcdf_encoding(ds) if compress else {}
     try:
         ds.to_netcdf(tmp, engine="netcdf4", encoding=enc)
         os.replace(tmp, path)
@@ -81,6 +91,7 @@ def atomic_write_dataset(ds, path: str | Path, *, compress: bool = True) -> Path
 
 
 def atomic_write_bytes(data: bytes, path: str | Path) -> Path:
+    """Write ``data`` to ``path`` atomically (``.NAME.XXXX.part`` beside it, then renamed)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = _tmp_path(path)
@@ -93,12 +104,15 @@ def atomic_write_bytes(data: bytes, path: str | Path) -> Path:
     return path
 
 
-def atomic_write_json(obj, path: str | Path) -> Path:
-    return atomic_write_bytes((json.dumps(obj, indent=2, sort_keys=True, default=_json_default) + "\n").encode(), path)
+def atomic_write_json(obj, path: str | Path, *, sort_keys: bool = True) -> Path:
+    """Write ``obj`` as indented JSON atomically (NumPy values and paths encoded by :func:`json_default`)."""
+    text = json.dumps(obj, indent=2, sort_keys=sort_keys, default=json_default) + "\n"
+    return atomic_write_bytes(text.encode(), path)
 
 
-def _json_default(o):
-    if isinstance(o, (np.floating, np.integer)):
+def json_default(o):
+    """The JSON encoding of what simsat writes besides JSON types: NumPy scalars and arrays, paths."""
+    if isinstance(o, (np.floating, np.integer, np.bool_)):
         return o.item()
     if isinstance(o, np.ndarray):
         return o.tolist()
@@ -108,8 +122,6 @@ def _json_default(o):
 
 
 def _open(path: Path):
-    import xarray as xr
-
     if not path.exists():
         raise ProductError(f"{path}: file not found")
     try:
@@ -124,8 +136,6 @@ def _open_lazy_images(path: Path):
     ``Product.image`` reads a band when asked (and does not keep it), so a
     restoration holds only the bands it is working on, whatever the product's size.
     """
-    import xarray as xr
-
     if not path.exists():
         raise ProductError(f"{path}: file not found")
     try:
@@ -174,6 +184,12 @@ class Product:
         return str(self.ds.attrs.get("reference_detector", self.band_names[0]))
 
     @property
+    def image_shapes(self) -> dict:
+        """``{band: (lines, columns)}`` (from the file's metadata: no image is read)."""
+        return {d.name: tuple(int(n) for n in self.ds[f"image_{d.name}"].shape)
+                for d in self.instrument.detectors if f"image_{d.name}" in self.ds}
+
+    @property
     def pixel_ifov_rad(self) -> float:
         return self.instrument.ifov_rad(self.reference_detector)
 
@@ -207,13 +223,75 @@ class Product:
 
     def sensor_model(self, attitude=None):
         """Sensor model with the product's geometry (default attitude: knowledge)."""
-        from .sensor_model import SensorModel
-
         return SensorModel(platform=self.platform, instrument=self.instrument, dem=self.dem,
                            attitude=attitude or clamped_attitude(self.knowledge), t0_s=float(self.ds.attrs["t0_s"]))
 
     def delay_s(self, ahead: str, behind: str) -> float:
         return self.sensor_model().nominal_delay_s(ahead, behind)
+
+
+def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem):
+    """The ``product.nc`` dataset of scenario ``sc`` (the reader is :func:`read_product`).
+
+    ``images``: band → (line, column) DN, or None (streamed in afterwards by
+    the renderer); ``kn``/``st``: knowledge and star-tracker attitude series;
+    ``known_dem``: the DEM the ground segment knows.
+    """
+    inst = sc.instrument
+    plat = sc.platform
+    dets = inst.detectors
+    npix = {d.pixels for d in dets}
+    data = {}
+    coords = {"line": ("line", np.arange(len(t_lines), dtype=np.int32)),
+              "time": ("line", np.asarray(t_lines, dtype=np.float64), {"units": "s", "long_name": "line time"}),
+              "detector": ("detector", np.array([d.name for d in dets]))}
+    for d in dets if images is not None else ():
+        col_dim = "column" if len(npix) == 1 else f"column_{d.name}"
+        data[f"image_{d.name}"] = ((("line", col_dim)), images[d.name],
+                                   {"units": "DN", "band": d.band, "detector": d.name,
+                                    "long_name": f"raw image of detector {d.name} ({d.band})"})
+    pos = plat.position(np.asarray(t_lines))
+    data["ephemeris"] = (("line", "xyz"), pos, {"units": "m", "long_name": "platform position, local frame"})
+    data["detector_band"] = ("detector", np.array([d.band for d in dets]))
+    data["detector_along_m"] = ("detector", np.array([d.along_m for d in dets]), {"units": "m"})
+    data["detector_across_m"] = ("detector", np.array([d.across_m for d in dets]), {"units": "m"})
+    data["detector_pixels"] = ("detector", np.array([d.pixels for d in dets], dtype=np.int32))
+    data["detector_pitch_m"] = ("detector", np.array([d.pitch_m for d in dets]), {"units": "m"})
+    data["knowledge_roll"] = ("knowledge_time", kn.roll, {"units": "rad", "long_name": "AOCS knowledge roll"})
+    data["knowledge_pitch"] = ("knowledge_time", kn.pitch, {"units": "rad"})
+    data["knowledge_yaw"] = ("knowledge_time", kn.yaw, {"units": "rad"})
+    coords["knowledge_time"] = ("knowledge_time", kn.time, {"units": "s"})
+    if st is not None:
+        data["star_tracker_roll"] = ("star_tracker_time", st.roll, {"units": "rad"})
+        data["star_tracker_pitch"] = ("star_tracker_time", st.pitch, {"units": "rad"})
+        data["star_tracker_yaw"] = ("star_tracker_time", st.yaw, {"units": "rad"})
+        coords["star_tracker_time"] = ("star_tracker_time", st.time, {"units": "s"})
+    # band delays for every ordered pair (ahead, behind)
+    pairs, taus = [], []
+    for a in dets:
+        for b in dets:
+            if a.name != b.name and a.along_m > b.along_m:
+                pairs.append(f"{a.name}/{b.name}")
+                taus.append(sc.delay_s(a.name, b.name))
+    data["delay_s"] = ("pair", np.array(taus), {"units": "s", "long_name": "nominal delay: behind sees what ahead saw"})
+    coords["pair"] = ("pair", np.array(pairs))
+    data["dem"] = (("dem_y", "dem_x"), np.asarray(known_dem.z, dtype=np.float64),
+                   {"units": "m", "long_name": "DEM known by the ground segment"})
+    coords["dem_x"] = ("dem_x", known_dem.x0_m + np.arange(known_dem.z.shape[1]) * known_dem.dx_m, {"units": "m"})
+    coords["dem_y"] = ("dem_y", known_dem.y0_m + np.arange(known_dem.z.shape[0]) * known_dem.dy_m, {"units": "m"})
+    attrs = {
+        "title": f"simsat product {sc.name}", "scenario": sc.name, "conventions": "simsat-1",
+        "t0_s": float(sc.t0_s), "line_period_s": inst.line_period_s, "focal_length_m": inst.focal_length_m,
+        "altitude_m": plat.altitude_m, "ground_speed_m_s": plat.ground_speed_m_s,
+        "platform_x_at_t0_m": plat.x_at_t0_m, "platform_y_m": plat.y_m,
+        "off_nadir_roll_rad": plat.off_nadir_roll_rad, "off_nadir_pitch_rad": plat.off_nadir_pitch_rad,
+        "reference_detector": sc.acquisition.reference_detector,
+        "pixel_ifov_rad": inst.ifov_rad(sc.acquisition.reference_detector),
+        "mtf_nyquist": inst.mtf_nyquist, "bits": inst.radiometry.bits,
+        "dem_dx_m": float(known_dem.dx_m), "dem_dy_m": float(known_dem.dy_m),
+        "attitude_convention": "body->local R = Rz(yaw) Ry(pitch) Rx(roll); roll moves image across-track",
+    }
+    return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
 def check_image(img: np.ndarray, where: str) -> None:
@@ -303,11 +381,6 @@ def clamped_attitude(series):
 
 def read_product(run_dir: str | Path) -> Product:
     """Read ``product.nc`` of a run directory (or a product file path)."""
-    from .attitude import AttitudeSeries
-    from .instrument import Detector, Instrument, Radiometry
-    from .platform import Platform
-    from .terrain import Dem
-
     p = Path(run_dir)
     if p.is_dir():
         p = p / "product.nc"
@@ -349,9 +422,31 @@ def read_product(run_dir: str | Path) -> Product:
     return Product(path=p, ds=ds, platform=plat, instrument=inst, knowledge=kn, dem=dem, star_tracker=st)
 
 
-def read_truth(run_dir: str | Path):
-    """Read ``truth.nc`` (for reports and benchmarks only — never for restoration)."""
+def check_truth(truth, path, product_time: np.ndarray) -> None:
+    """Refuse a ``truth.nc`` whose axes are missing or not finite, or that does not cover the product's lines."""
+    for name in ("time",) + AXES:
+        if name not in truth.variables:
+            raise ProductError(f"{path}: no variable {name!r} (truth needs time, roll, pitch, yaw)")
+        v = np.asarray(truth[name].values, dtype=np.float64)
+        if v.ndim != 1 or v.size < 2 or not np.isfinite(v).all():
+            raise ProductError(f"{path}: variable {name!r} must be a finite series over 'time'")
+    t = np.asarray(truth["time"].values, dtype=np.float64)
+    if np.any(np.diff(t) <= 0):
+        raise ProductError(f"{path}: variable 'time' must increase strictly")
+    if t[0] > product_time[0] + 1e-9 or t[-1] < product_time[-1] - 1e-9:
+        raise ProductError(f"{path}: truth covers [{t[0]:.6g}, {t[-1]:.6g}] s, not the product's lines "
+                           f"[{product_time[0]:.6g}, {product_time[-1]:.6g}] s: another run's truth")
+
+
+def read_truth(run_dir: str | Path, *, product_time: np.ndarray | None = None):
+    """Read ``truth.nc`` (for reports and benchmarks only — never for restoration).
+
+    With ``product_time`` the truth is checked against the product's lines (:func:`check_truth`).
+    """
     p = Path(run_dir)
     if p.is_dir():
         p = p / "truth.nc"
-    return _open(p)
+    truth = _open(p)
+    if product_time is not None:
+        check_truth(truth, p, np.asarray(product_time, dtype=np.float64))
+    return truth

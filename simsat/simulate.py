@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .product import atomic_write_dataset, atomic_write_json, make_tmp_dir
+from .product import atomic_write_dataset, atomic_write_json, make_tmp_dir, netcdf_encoding, product_dataset
 from .rundir import RunLock, content_id, install_files, prepare_output_dir
 from .scenario import Scenario, load_scenario
 
@@ -157,7 +157,7 @@ def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> Simulati
     t_truth = np.arange(t_lines[0] - inst.line_period_s, t_lines[-1] + inst.line_period_s + 1e-12, dt_truth)
     tr, tp, ty = model.evaluate(t_truth)
 
-    ds = _product_dataset(sc, None, t_lines, kn, st, known_dem)
+    ds = product_dataset(sc, None, t_lines, kn, st, known_dem)
     truth = xr.Dataset(
         {"roll": ("time", tr, {"units": "rad", "long_name": "true line-of-sight roll"}),
          "pitch": ("time", tp, {"units": "rad", "long_name": "true line-of-sight pitch"}),
@@ -180,7 +180,7 @@ def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> Simulati
         atomic_write_dataset(truth, tmp / "truth.nc")
         # the product: everything but the images, then the images block after block (memory bounded by
         # one block of lines, whatever the image length); tmp is moved into place only when complete
-        ds.to_netcdf(tmp / "product.nc", engine="netcdf4", encoding=_encoding(ds))
+        ds.to_netcdf(tmp / "product.nc", engine="netcdf4", encoding=netcdf_encoding(ds))
         timings["write_s"] = _time.perf_counter() - t
         _render_images_into(sc, renderer, tmp / "product.nc", t_lines, timings, progress=progress)
         timings["total_s"] = _time.perf_counter() - t_all
@@ -201,12 +201,6 @@ def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> Simulati
     from .render import release_memory
     release_memory()
     return SimulationResult(out_dir=out_dir, timings=timings, render_stats=render_stats, replaced=replaced)
-
-
-def _encoding(ds) -> dict:
-    from .product import NETCDF_ENCODING
-
-    return {k: dict(NETCDF_ENCODING) for k, v in ds.data_vars.items() if v.dtype.kind in "fiu" and v.ndim >= 1}
 
 
 def _render_images_into(sc: Scenario, renderer, path: Path, t_lines, timings: dict, *, progress: bool) -> None:
@@ -260,63 +254,3 @@ def _render_images_into(sc: Scenario, renderer, path: Path, t_lines, timings: di
     timings["render_s"] = t_render
     timings["radiometry_s"] = t_radio
     timings["write_s"] = timings.get("write_s", 0.0) + t_write
-
-
-def _product_dataset(sc: Scenario, images: dict | None, t_lines, kn, st, known_dem):
-    import xarray as xr
-
-    inst = sc.instrument
-    plat = sc.platform
-    dets = inst.detectors
-    npix = {d.pixels for d in dets}
-    data = {}
-    coords = {"line": ("line", np.arange(len(t_lines), dtype=np.int32)),
-              "time": ("line", np.asarray(t_lines, dtype=np.float64), {"units": "s", "long_name": "line time"}),
-              "detector": ("detector", np.array([d.name for d in dets]))}
-    for d in dets if images is not None else ():
-        col_dim = "column" if len(npix) == 1 else f"column_{d.name}"
-        data[f"image_{d.name}"] = ((("line", col_dim)), images[d.name],
-                                   {"units": "DN", "band": d.band, "detector": d.name,
-                                    "long_name": f"raw image of detector {d.name} ({d.band})"})
-    pos = plat.position(np.asarray(t_lines))
-    data["ephemeris"] = (("line", "xyz"), pos, {"units": "m", "long_name": "platform position, local frame"})
-    data["detector_band"] = ("detector", np.array([d.band for d in dets]))
-    data["detector_along_m"] = ("detector", np.array([d.along_m for d in dets]), {"units": "m"})
-    data["detector_across_m"] = ("detector", np.array([d.across_m for d in dets]), {"units": "m"})
-    data["detector_pixels"] = ("detector", np.array([d.pixels for d in dets], dtype=np.int32))
-    data["detector_pitch_m"] = ("detector", np.array([d.pitch_m for d in dets]), {"units": "m"})
-    data["knowledge_roll"] = ("knowledge_time", kn.roll, {"units": "rad", "long_name": "AOCS knowledge roll"})
-    data["knowledge_pitch"] = ("knowledge_time", kn.pitch, {"units": "rad"})
-    data["knowledge_yaw"] = ("knowledge_time", kn.yaw, {"units": "rad"})
-    coords["knowledge_time"] = ("knowledge_time", kn.time, {"units": "s"})
-    if st is not None:
-        data["star_tracker_roll"] = ("star_tracker_time", st.roll, {"units": "rad"})
-        data["star_tracker_pitch"] = ("star_tracker_time", st.pitch, {"units": "rad"})
-        data["star_tracker_yaw"] = ("star_tracker_time", st.yaw, {"units": "rad"})
-        coords["star_tracker_time"] = ("star_tracker_time", st.time, {"units": "s"})
-    # band delays for every ordered pair (ahead, behind)
-    pairs, taus = [], []
-    for a in dets:
-        for b in dets:
-            if a.name != b.name and a.along_m > b.along_m:
-                pairs.append(f"{a.name}/{b.name}")
-                taus.append(sc.delay_s(a.name, b.name))
-    data["delay_s"] = ("pair", np.array(taus), {"units": "s", "long_name": "nominal delay: behind sees what ahead saw"})
-    coords["pair"] = ("pair", np.array(pairs))
-    data["dem"] = (("dem_y", "dem_x"), np.asarray(known_dem.z, dtype=np.float64),
-                   {"units": "m", "long_name": "DEM known by the ground segment"})
-    coords["dem_x"] = ("dem_x", known_dem.x0_m + np.arange(known_dem.z.shape[1]) * known_dem.dx_m, {"units": "m"})
-    coords["dem_y"] = ("dem_y", known_dem.y0_m + np.arange(known_dem.z.shape[0]) * known_dem.dy_m, {"units": "m"})
-    attrs = {
-        "title": f"simsat product {sc.name}", "scenario": sc.name, "conventions": "simsat-1",
-        "t0_s": float(sc.t0_s), "line_period_s": inst.line_period_s, "focal_length_m": inst.focal_length_m,
-        "altitude_m": plat.altitude_m, "ground_speed_m_s": plat.ground_speed_m_s,
-        "platform_x_at_t0_m": plat.x_at_t0_m, "platform_y_m": plat.y_m,
-        "off_nadir_roll_rad": plat.off_nadir_roll_rad, "off_nadir_pitch_rad": plat.off_nadir_pitch_rad,
-        "reference_detector": sc.acquisition.reference_detector,
-        "pixel_ifov_rad": inst.ifov_rad(sc.acquisition.reference_detector),
-        "mtf_nyquist": inst.mtf_nyquist, "bits": inst.radiometry.bits,
-        "dem_dx_m": float(known_dem.dx_m), "dem_dy_m": float(known_dem.dy_m),
-        "attitude_convention": "body->local R = Rz(yaw) Ry(pitch) Rx(roll); roll moves image across-track",
-    }
-    return xr.Dataset(data, coords=coords, attrs=attrs)

@@ -4,7 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from simsat.attitude import (URAD, AttitudeModel, AttitudeSeries, CMGJitter, DampedChirpJitter,
+from simsat.units import RAD_PER_URAD as URAD
+from simsat.attitude import (AttitudeModel, AttitudeSeries, CMGJitter, DampedChirpJitter,
                              HarmonicJitter, PolynomialDrift, PSDJitter, SmoothRandomProcess,
                              aocs_knowledge, star_tracker_samples)
 from simsat.config import ScenarioError, Section

@@ -1,5 +1,4 @@
 """Scenario loading and validation: every error names the TOML key or the file."""
-import copy
 import subprocess
 import sys
 import tomllib
@@ -109,7 +108,6 @@ def test_cli_validate_reports_one_line_without_traceback(tmp_path):
     raw = _raw()
     raw["instrument"]["line_period_ms"] = -1
     bad = tmp_path / "bad.toml"
-    import json
     # write TOML by hand (no TOML writer in the stdlib)
     text = BUILTIN["tiny"].read_text().replace("line_period_ms = 0.4", "line_period_ms = -1")
     bad.write_text(text)

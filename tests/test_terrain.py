@@ -240,6 +240,7 @@ def test_resample():
     assert fine.dx_m == fine.dy_m == 2.5
     (xa, xb), (ya, yb) = fine.x_range, fine.y_range
     assert dem.x_range[0] <= xa and xb <= dem.x_range[1]
+    assert dem.y_range[0] <= ya and yb <= dem.y_range[1]
     X, Y = np.meshgrid(fine.x, fine.y)
     np.testing.assert_allclose(fine.z, 3.0 + 0.1 * X + 0.05 * Y, atol=1e-9)   # bilinear is exact on planes
     coarse = resample(dem, 25.0)
