@@ -57,6 +57,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from reports import plotting as P
+from restore.integration.transfer import chain_gain, fused_chain_gain, pair_transfer, wiener_gain
 
 __all__ = [
     "PATENT_TAU_S",
@@ -68,8 +69,6 @@ __all__ = [
     "FIG14_DEGREE",
     "FIGURE_NAMES",
     "FigureData",
-    "pair_response",
-    "wiener_response",
     "chain_gain",
     "inverse_gain",
     "joint_chain_gain",
@@ -168,52 +167,22 @@ class FigureData:
 
 
 # ---------------------------------------------------------------------------
-# Analytic transfer functions (written here independently of restore/)
+# Analytic transfer functions: restore.integration.transfer's (the tests hold an independent oracle)
 # ---------------------------------------------------------------------------
-
-def _omega(freq_hz) -> np.ndarray:
-    return 2.0 * np.pi * np.asarray(freq_hz, dtype=float)
-
-
-def pair_response(freq_hz, tau_s: float) -> np.ndarray:
-    """Pair transfer ``G(ω) = e^{jωτ} − 1`` (Δθ = G·θ), complex, dimensionless."""
-    return np.exp(1j * _omega(freq_hz) * tau_s) - 1.0
-
-
-def wiener_response(freq_hz, tau_s: float, k: float) -> np.ndarray:
-    """Pseudo-inverse estimator ``H_k = conj(G)/(|G|² + k)`` (θ̂ = H_k·Δθ), complex.
-
-    Equals ``(e^{−jωτ} − 1) / (2(1 − cos ωτ) + k)`` (patent).
-    """
-    if k <= 0:
-        raise ValueError(f"k must be > 0, got {k!r}")
-    g = pair_response(freq_hz, tau_s)
-    return np.conj(g) / (np.abs(g) ** 2 + k)
-
-
-def chain_gain(freq_hz, tau_s: float, k: float) -> np.ndarray:
-    """Chain gain ``F_k = G·H_k = 2(1−cos ωτ)/(2(1−cos ωτ) + k)`` (θ → θ̂), real."""
-    if k <= 0:
-        raise ValueError(f"k must be > 0, got {k!r}")
-    g2 = 2.0 * (1.0 - np.cos(_omega(freq_hz) * tau_s))
-    return g2 / (g2 + k)
-
 
 def inverse_gain(freq_hz, tau_s: float) -> np.ndarray:
     """Gain ``1/|G|`` of the bare inverse filter (inf at the blind frequencies)."""
     with np.errstate(divide="ignore"):
-        return 1.0 / np.abs(pair_response(freq_hz, tau_s))
+        return 1.0 / np.abs(pair_transfer(freq_hz, tau_s))
 
 
 def joint_chain_gain(freq_hz, taus_s: Sequence[float], k: float) -> np.ndarray:
-    """Chain gain of the joint multi-pair Wiener estimator.
+    """Chain gain of the joint multi-pair Wiener estimator ``Σ_j |G_j|² / (Σ_j |G_j|² + k)``.
 
     Minimising ``Σ_j |Δ_j − G_j Θ|² + k|Θ|²`` gives
-    ``Θ̂ = Σ_j conj(G_j) Δ_j / (Σ_j |G_j|² + k)``, hence the chain gain
-    ``Σ_j |G_j|² / (Σ_j |G_j|² + k)``: blind only where *all* pairs are blind.
+    ``Θ̂ = Σ_j conj(G_j) Δ_j / (Σ_j |G_j|² + k)``: blind only where *all* pairs are blind.
     """
-    s = sum(np.abs(pair_response(freq_hz, t)) ** 2 for t in taus_s)
-    return s / (s + k)
+    return fused_chain_gain(freq_hz, list(taus_s), k=k)
 
 
 def envelope_chain_gain(freq_hz, taus_s: Sequence[float], k: float) -> np.ndarray:
@@ -586,7 +555,7 @@ def _single_pair_data(number: int, configs: Sequence[tuple[float, float]], quant
     blocks = []
     for tau, k in configs:
         series = _label_k(k) if vary == "k" else _label_tau(tau)
-        h = wiener_response(f, tau, k)
+        h = wiener_gain(f, tau, k)
         values = {
             "estimator_gain": (np.abs(h), "1"),
             "chain_gain": (chain_gain(f, tau, k), "1"),

@@ -35,6 +35,7 @@ from simsat.units import AXES
 
 from reports.metrics import error_stats, misregistration_floor, truth_at
 from restore.integration.methods import integration_method
+from restore.integration.transfer import chain_gain, fused_chain_gain
 from restore.restoration_io import check_restoration, open_restoration, result_from_dataset
 from simsat.product import ProductError, read_product, read_truth
 
@@ -567,16 +568,13 @@ def frozen_chain_gain(freq_hz, taus: Sequence[float], spectrum: dict, te: float)
 
     ``F = Σ_j |G_j|² S/N_j / (1 + Σ_j |G_j|² S/N_j)``, ``G_j = e^{jωτ_j} − 1``,
     ``S`` the (two-sided) PSD prior of θ and ``N_j = σ_j² Δt`` the PSD of the
-    white noise of pair j (std ``σ_j`` per sample).
+    white noise of pair j (std ``σ_j`` per sample):
+    :func:`restore.integration.transfer.fused_chain_gain`.
     """
     f = np.asarray(freq_hz, dtype=np.float64)
     s = np.interp(np.abs(f), spectrum["freq"], spectrum["psd"], left=0.0, right=0.0)
     sig = np.broadcast_to(np.asarray(spectrum["noise_std"], dtype=np.float64), (len(taus),))
-    acc = np.zeros(f.shape)
-    for tau, sj in zip(taus, sig):
-        g2 = 2.0 * (1.0 - np.cos(2.0 * np.pi * f * tau))
-        acc += g2 * s / max(sj * sj * te, 1e-300)
-    return acc / (1.0 + acc)
+    return fused_chain_gain(f, list(taus), signal_psd=s, noise_psd=np.maximum(sig * sig * te, 1e-300))
 
 
 def probe_window_gain(freq_hz, taus: Sequence[float], spectrum: dict, te: float, n: int, *,
@@ -743,23 +741,13 @@ def measured_transfer(run: RunData) -> dict:
 
 
 def analytic_chain_gain(freq_hz, tau_s: float, k: float) -> np.ndarray:
-    """Single-pair Wiener chain gain ``F_k = 2(1−cos ωτ) / (2(1−cos ωτ) + k)``.
-
-    Taken from ``restore.integration.transfer.chain_gain`` when it exists.
-    """
-    try:
-        from restore.integration.transfer import chain_gain  # noqa: WPS433
-        return np.asarray(chain_gain(np.asarray(freq_hz, float), float(tau_s), float(k)), dtype=np.float64)
-    except Exception:
-        g2 = 2.0 * (1.0 - np.cos(2.0 * np.pi * np.asarray(freq_hz, float) * tau_s))
-        return g2 / (g2 + k)
+    """Single-pair Wiener chain gain ``F_k = 2(1−cos ωτ) / (2(1−cos ωτ) + k)`` (:func:`restore.integration.transfer.chain_gain`)."""
+    return np.asarray(chain_gain(np.asarray(freq_hz, float), float(tau_s), float(k)), dtype=np.float64)
 
 
 def analytic_joint_gain(freq_hz, taus: Sequence[float], k: float) -> np.ndarray:
     """Joint multi-pair Wiener chain gain ``Σ|G_j|² / (Σ|G_j|² + k)``, ``G_j = e^{jωτ_j} − 1``."""
-    f = np.asarray(freq_hz, float)
-    s = sum(2.0 * (1.0 - np.cos(2.0 * np.pi * f * t)) for t in taus)
-    return s / (s + k)
+    return fused_chain_gain(np.asarray(freq_hz, float), list(taus), k=k)
 
 
 def regularisation_k(method: str | None, options: dict) -> float | None:

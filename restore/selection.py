@@ -35,7 +35,7 @@ from scipy import ndimage
 from .matching import support_margin
 
 __all__ = [
-    "estimate_noise",
+    "estimate_image_noise",
     "select_points_in_blocks",
     "gradient_energy",
     "expected_matching_std",
@@ -81,7 +81,7 @@ def _dilate(mask: np.ndarray, window: tuple[int, int]) -> np.ndarray:
     return ndimage.maximum_filter(mask.astype(np.uint8), size=window, mode="constant", cval=0) > 0
 
 
-def estimate_noise(image) -> float:
+def estimate_image_noise(image) -> float:
     """Standard deviation of the white noise of an image (robust).
 
     Immerkaer's mask (a difference of two Laplacians, zero on planes) has a
@@ -190,7 +190,7 @@ def expected_matching_std(image, *, window=(3, 31), noise_std=None) -> tuple[np.
         Matching window (lines, columns), odd.
     noise_std : float or None, keyword-only
         Noise standard deviation of each band (image unit); estimated by
-        :func:`estimate_noise` when None.
+        :func:`estimate_image_noise` when None.
 
     Returns
     -------
@@ -202,7 +202,7 @@ def expected_matching_std(image, *, window=(3, 31), noise_std=None) -> tuple[np.
     """
     img = _as_image(image)
     window = _check_window(window)
-    sigma = estimate_noise(img) if noise_std is None else float(noise_std)
+    sigma = estimate_image_noise(img) if noise_std is None else float(noise_std)
     if not sigma >= 0:
         raise ValueError(f"noise_std: must be >= 0, got {noise_std}")
     e_l, e_c = gradient_energy(img, window=window)
@@ -260,7 +260,7 @@ def _texture(image, *, window, noise_std, max_std, min_contrast, saturation, max
         raise ValueError(f"min_contrast: must be >= 0, got {min_contrast}")
     nodata = ~np.isfinite(img)
     work = np.where(nodata, 0.0, img) if nodata.any() else img
-    sigma = estimate_noise(img) if noise_std is None else noise_std
+    sigma = estimate_image_noise(img) if noise_std is None else noise_std
     if not (sigma is not None and float(sigma) >= 0):
         raise ValueError(f"noise_std: must be >= 0, got {noise_std}")
     std_l, std_c = expected_matching_std(work, window=window, noise_std=float(sigma))
@@ -360,7 +360,7 @@ def double_gradient_points(image, *, threshold=None, n_sigma=4.0, noise_std=None
     if threshold is None:
         if not n_sigma > 0:
             raise ValueError(f"n_sigma: must be > 0, got {n_sigma}")
-        noise = estimate_noise(img) if noise_std is None else float(noise_std)
+        noise = estimate_image_noise(img) if noise_std is None else float(noise_std)
         if not noise >= 0:
             raise ValueError(f"noise_std: must be >= 0, got {noise_std}")
         threshold = n_sigma * _second_difference_gain(sigma) * noise
@@ -539,7 +539,7 @@ def select_points(image, *, method="grid", per_line=20, window=(3, 31), search=(
         return empty
 
     if noise_std is None:
-        noise_std = estimate_noise(img)
+        noise_std = estimate_image_noise(img)
     usable, std_l, std_c = _texture(img, window=window, noise_std=noise_std, max_std=max_std,
                                     min_contrast=min_contrast, saturation=saturation, max_level=max_level)
     if mask is not None:
@@ -611,7 +611,7 @@ def select_points_in_blocks(image, *, block_lines: int = 512, noise_std=None, li
     """
     n_lines, n_cols = np.shape(image)
     if noise_std is None:
-        noise_std = estimate_noise(image)
+        noise_std = estimate_image_noise(image)
     context = 32
     if method == "double_gradient":
         context = max(context, n_cols // (2 * int(per_line)) + 16)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from restore.integration import integrate
-from restore.integration.spectrum import estimate_noise, estimate_spectrum
+from restore.integration.spectrum import estimate_differential_noise, estimate_spectrum
 from restore.integration.transfer import pair_transfer
 from restore.integration.wiener import integrate_wiener
 
@@ -59,7 +59,7 @@ def test_wiener_pure_noise_gives_zero():
 
 def test_noise_estimate_from_blind_frequencies():
     diffs, _ = make(THETA, 6000, sigma=0.03, seed=3)
-    np.testing.assert_allclose(estimate_noise(diffs, TAUS, DT), 0.03, rtol=0.1)
+    np.testing.assert_allclose(estimate_differential_noise(diffs, TAUS, DT), 0.03, rtol=0.1)
     spec = estimate_spectrum(diffs, TAUS, DT)
     var_lines = sum(a**2 / 2 for a in [1.0, 0.8, 0.3, 0.2])
     assert spec.variance == pytest.approx(var_lines, rel=0.05)

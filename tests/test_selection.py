@@ -4,7 +4,7 @@ import pytest
 
 from reports.bench_matching import _evaluate, _texture_terms
 from restore.matching import support_margin
-from restore.selection import (double_gradient_points, estimate_noise, expected_matching_std,
+from restore.selection import (double_gradient_points, estimate_image_noise, expected_matching_std,
                                gradient_energy, grid_points, select_points, spread_quality_subset,
                                texture_mask)
 
@@ -31,7 +31,7 @@ def scene():
 def test_estimate_noise_on_white_noise():
     rng = np.random.default_rng(1)
     img = 3.0 * rng.standard_normal((400, 400)) + np.linspace(0, 50, 400)[None, :]  # a plane is ignored
-    assert estimate_noise(img) == pytest.approx(3.0, rel=0.05)
+    assert estimate_image_noise(img) == pytest.approx(3.0, rel=0.05)
 
 
 def test_expected_std_matches_delon_rouge_on_a_sinusoid():
@@ -186,13 +186,13 @@ def test_select_points_bad_parameters(scene, kw, name):
 def test_noise_estimate_in_blocks_is_the_exact_median():
     from scipy import ndimage
 
-    from restore.selection import _IMMERKAER, estimate_noise
+    from restore.selection import _IMMERKAER, estimate_image_noise
 
     rng = np.random.default_rng(3)
     for shape in [(3, 3), (5, 4), (1300, 41)]:
         img = np.round(rng.normal(100, 5, shape) * (1 + rng.random(shape)))  # many ties
         resp = np.abs(ndimage.correlate(img.astype(float), _IMMERKAER, mode="nearest")[1:-1, 1:-1])
-        assert estimate_noise(img) == float(np.median(resp) / (0.6745 * 6.0))
+        assert estimate_image_noise(img) == float(np.median(resp) / (0.6745 * 6.0))
 
 
 @pytest.mark.parametrize("method", ["grid", "double_gradient"])

@@ -14,7 +14,7 @@ import numpy as np
 
 from ._common import check_positive, per_pair, prepare
 from .gaps import estimable_mask
-from .spectrum import estimate_noise
+from .spectrum import estimate_differential_noise
 
 __all__ = ["integrate_polynomial", "polynomial_gain", "polynomial_design"]
 
@@ -58,7 +58,7 @@ def integrate_polynomial(diffs, taus, dt, *, degree: int = 3, noise_std=None,
     p, n = D.shape
     sig = per_pair(noise_std, p, "noise_std")
     if sig is None:
-        sig = estimate_noise(D, taus, dt) if n >= 64 else np.ones(p)
+        sig = estimate_differential_noise(D, taus, dt) if n >= 64 else np.ones(p)
     sig = np.maximum(sig, 1e-12 * max(np.nanstd(D), 1e-300))
     t = np.arange(n) * dt
     t_c, h = 0.5 * (t[-1] + taus.max()), max(0.5 * (t[-1] + taus.max()), dt)

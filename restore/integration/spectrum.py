@@ -25,7 +25,7 @@ from scipy.stats import gamma
 
 from ._common import per_pair, prepare
 
-__all__ = ["SpectralEstimate", "estimate_noise", "estimate_spectrum", "find_lines", "Lines"]
+__all__ = ["SpectralEstimate", "estimate_differential_noise", "estimate_spectrum", "find_lines", "Lines"]
 
 _BLIND_G2 = 0.05
 
@@ -137,7 +137,7 @@ class SpectralEstimate:
         return float(2 * np.sum(self.psd) / (self.n_fft * self.dt))
 
 
-def estimate_noise(diffs, taus, dt, *, n_fft: int | None = None) -> np.ndarray:
+def estimate_differential_noise(diffs, taus, dt, *, n_fft: int | None = None) -> np.ndarray:
     """White-noise standard deviation of each differential (rad), from the data.
 
     Uses the tapered periodogram near each pair's blind frequencies ``n / tau``
