@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import numpy as np
 from scipy.interpolate import CubicSpline, make_interp_spline
@@ -487,69 +487,103 @@ class PolynomialDrift(Disturbance):
 # ---------------------------------------------------------------------------
 # Config
 # ---------------------------------------------------------------------------
+def _harmonic_from_config(sec: Section, *, rng: np.random.Generator, t_start: float, t_end: float) -> Disturbance:
+    """``kind = "harmonic"``: one sine, optional slow frequency drift."""
+    return HarmonicJitter(
+        frequency_hz=sec.number("frequency_hz", gt=0, le=MAX_FREQUENCY_HZ),
+        amplitude_rad=sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD,
+        phase_rad=math.radians(sec.number("phase_deg", 0.0)),
+        drift=sec.number("drift_percent", 0.0, gt=-100) / 100,
+        drift_shape=sec.string("drift_shape", "linear", choices=_DRIFT_SHAPES),
+        t0=t_start, t_end=t_end)
+
+
+def _cmg_from_config(sec: Section, *, rng: np.random.Generator, t_start: float, t_end: float) -> Disturbance:
+    """``kind = "cmg"``: CMG / reaction-wheel exciters and their harmonics, drifting."""
+    fe = sec.numbers("exciter_frequencies_hz", min_length=1, gt=0)
+    _check_list_max(sec, "exciter_frequencies_hz", fe, MAX_FREQUENCY_HZ)
+    hh = sec.numbers("harmonics", [1.0], min_length=1, gt=0)
+    _check_list_max(sec, "harmonics", hh, 1000.0)
+    amp = sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD
+    rexc = sec.numbers("exciter_amplitude_ratios", None, length=len(fe), ge=0)
+    rharm = sec.numbers("harmonic_amplitude_ratios", None, length=len(hh), ge=0)
+    drift = sec.numbers("drift_percent", [0.0, 0.0], ge=0)
+    _check_list_max(sec, "drift_percent", drift, 50.0)
+    if len(drift) == 1:
+        drift = drift * 2
+    if len(drift) != 2 or drift[0] > drift[1]:
+        raise sec.error("drift_percent", f"must be [min, max] with min <= max, got {drift}")
+    return CMGJitter(
+        exciter_frequencies_hz=fe, harmonics=hh, amplitude_rad=amp, rng=rng,
+        t0=t_start, t_end=t_end, exciter_amplitude_ratios=rexc,
+        harmonic_amplitude_ratios=rharm, drift_range=(drift[0] / 100, drift[1] / 100),
+        frequency_noise=sec.number("frequency_noise_percent", 0.0, ge=0, le=50) / 100,
+        amplitude_noise=sec.number("amplitude_noise_percent", 0.0, ge=0, le=100) / 100,
+        noise_bandwidth_hz=sec.number("noise_bandwidth_hz", 1.0, gt=0, le=MAX_FREQUENCY_HZ))
+
+
+def _damped_chirp_from_config(sec: Section, *, rng: np.random.Generator, t_start: float, t_end: float) -> Disturbance:
+    """``kind = "damped_chirp"``: damped chirp (SPOT5 mirror rocking)."""
+    return DampedChirpJitter(
+        amplitude_rad=sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD,
+        frequency_hz=sec.number("frequency_hz", gt=0, le=MAX_FREQUENCY_HZ),
+        chirp_hz_per_s=sec.number("chirp_hz_per_s", 0.0, ge=-1e5, le=1e5),
+        damping_time_s=sec.number("damping_time_s", gt=0, le=1e6),
+        start_time_s=sec.number("start_time_s", 0.0, ge=-1e6, le=1e6), t0=t_start)
+
+
+def _psd_from_config(sec: Section, *, rng: np.random.Generator, t_start: float, t_end: float) -> Disturbance:
+    """``kind = "psd"``: random jitter of a given PSD (sum of sines)."""
+    f_min = sec.number("f_min_hz", 0.1, gt=0, le=MAX_FREQUENCY_HZ)
+    f_max = sec.number("f_max_hz", 1000.0, gt=0, le=MAX_FREQUENCY_HZ)
+    if not f_max > f_min:
+        raise sec.error("f_max_hz", f"must be > f_min_hz ({f_min:g}), got {f_max:g}")
+    return PSDJitter(
+        rms_rad=sec.number("rms_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD,
+        corner_hz=sec.number("corner_hz", gt=0, le=MAX_FREQUENCY_HZ), slope=sec.number("slope", 2.0, ge=0, le=10),
+        f_min_hz=f_min, f_max_hz=f_max, rng=rng, t0=t_start,
+        n_components=sec.integer("n_components", 400, ge=1, le=MAX_PSD_COMPONENTS))
+
+
+def _polynomial_from_config(sec: Section, *, rng: np.random.Generator, t_start: float, t_end: float) -> Disturbance:
+    """``kind = "polynomial"``: slow polynomial drift."""
+    coefs = sec.numbers("coefficients_urad", min_length=1)
+    _check_list_max(sec, "coefficients_urad", [abs(c) for c in coefs], MAX_AMPLITUDE_URAD)
+    if len(coefs) > 8:
+        raise sec.error("coefficients_urad", f"at most 8 coefficients (degree 7), got {len(coefs)}")
+    return PolynomialDrift(tuple(c * RAD_PER_URAD for c in coefs), t0=t_start)
+
+
+@dataclass(frozen=True)
+class DisturbanceKind:
+    """One ``[[attitude.jitter]]`` kind: its name, what it models and its builder from the table."""
+
+    name: str
+    description: str
+    from_config: Callable
+
+
+#: kind name → spec (``disturbance_from_config`` dispatches through it)
+DISTURBANCE_KINDS: dict[str, DisturbanceKind] = {k: DisturbanceKind(k, d, f) for k, d, f in (
+    ("harmonic", "one sine, optional slow frequency drift", _harmonic_from_config),
+    ("cmg", "CMG / reaction-wheel exciters and their harmonics, drifting", _cmg_from_config),
+    ("damped_chirp", "damped chirp (SPOT5 mirror rocking)", _damped_chirp_from_config),
+    ("psd", "random jitter of a given PSD (sum of sines)", _psd_from_config),
+    ("polynomial", "slow polynomial drift", _polynomial_from_config),
+)}
+
+
 def disturbance_from_config(sec: Section, *, rng: np.random.Generator, t_start: float,
                             t_end: float, kind: str) -> Disturbance:
-    """Build one disturbance of ``kind`` from its ``[[attitude.jitter]]`` table.
+    """Build one disturbance of ``kind`` (:data:`DISTURBANCE_KINDS`) from its ``[[attitude.jitter]]`` table.
 
     Reads the kind-specific keys (not ``kind`` nor ``axis``); the caller calls
     ``sec.finish()``.  ``rng`` supplies every random draw.
     """
-    if kind == "harmonic":
-        return HarmonicJitter(
-            frequency_hz=sec.number("frequency_hz", gt=0, le=MAX_FREQUENCY_HZ),
-            amplitude_rad=sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD,
-            phase_rad=math.radians(sec.number("phase_deg", 0.0)),
-            drift=sec.number("drift_percent", 0.0, gt=-100) / 100,
-            drift_shape=sec.string("drift_shape", "linear", choices=_DRIFT_SHAPES),
-            t0=t_start, t_end=t_end)
-    if kind == "cmg":
-        fe = sec.numbers("exciter_frequencies_hz", min_length=1, gt=0)
-        _check_list_max(sec, "exciter_frequencies_hz", fe, MAX_FREQUENCY_HZ)
-        hh = sec.numbers("harmonics", [1.0], min_length=1, gt=0)
-        _check_list_max(sec, "harmonics", hh, 1000.0)
-        amp = sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD
-        rexc = sec.numbers("exciter_amplitude_ratios", None, length=len(fe), ge=0)
-        rharm = sec.numbers("harmonic_amplitude_ratios", None, length=len(hh), ge=0)
-        drift = sec.numbers("drift_percent", [0.0, 0.0], ge=0)
-        _check_list_max(sec, "drift_percent", drift, 50.0)
-        if len(drift) == 1:
-            drift = drift * 2
-        if len(drift) != 2 or drift[0] > drift[1]:
-            raise sec.error("drift_percent", f"must be [min, max] with min <= max, got {drift}")
-        return CMGJitter(
-            exciter_frequencies_hz=fe, harmonics=hh, amplitude_rad=amp, rng=rng,
-            t0=t_start, t_end=t_end, exciter_amplitude_ratios=rexc,
-            harmonic_amplitude_ratios=rharm, drift_range=(drift[0] / 100, drift[1] / 100),
-            frequency_noise=sec.number("frequency_noise_percent", 0.0, ge=0, le=50) / 100,
-            amplitude_noise=sec.number("amplitude_noise_percent", 0.0, ge=0, le=100) / 100,
-            noise_bandwidth_hz=sec.number("noise_bandwidth_hz", 1.0, gt=0, le=MAX_FREQUENCY_HZ))
-    if kind == "damped_chirp":
-        return DampedChirpJitter(
-            amplitude_rad=sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD,
-            frequency_hz=sec.number("frequency_hz", gt=0, le=MAX_FREQUENCY_HZ),
-            chirp_hz_per_s=sec.number("chirp_hz_per_s", 0.0, ge=-1e5, le=1e5),
-            damping_time_s=sec.number("damping_time_s", gt=0, le=1e6),
-            start_time_s=sec.number("start_time_s", 0.0, ge=-1e6, le=1e6), t0=t_start)
-    if kind == "psd":
-        f_min = sec.number("f_min_hz", 0.1, gt=0, le=MAX_FREQUENCY_HZ)
-        f_max = sec.number("f_max_hz", 1000.0, gt=0, le=MAX_FREQUENCY_HZ)
-        if not f_max > f_min:
-            raise sec.error("f_max_hz", f"must be > f_min_hz ({f_min:g}), got {f_max:g}")
-        return PSDJitter(
-            rms_rad=sec.number("rms_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD,
-            corner_hz=sec.number("corner_hz", gt=0, le=MAX_FREQUENCY_HZ), slope=sec.number("slope", 2.0, ge=0, le=10),
-            f_min_hz=f_min, f_max_hz=f_max, rng=rng, t0=t_start,
-            n_components=sec.integer("n_components", 400, ge=1, le=MAX_PSD_COMPONENTS))
-    if kind == "polynomial":
-        coefs = sec.numbers("coefficients_urad", min_length=1)
-        _check_list_max(sec, "coefficients_urad", [abs(c) for c in coefs], MAX_AMPLITUDE_URAD)
-        if len(coefs) > 8:
-            raise sec.error("coefficients_urad", f"at most 8 coefficients (degree 7), got {len(coefs)}")
-        return PolynomialDrift(tuple(c * RAD_PER_URAD for c in coefs), t0=t_start)
-    raise ValueError(f"kind: unknown {kind!r}")  # pragma: no cover - guarded by caller
+    return DISTURBANCE_KINDS[kind].from_config(sec, rng=rng, t_start=t_start, t_end=t_end)
 
 
-_KINDS = ("harmonic", "cmg", "damped_chirp", "psd", "polynomial")
+_KINDS = tuple(DISTURBANCE_KINDS)
 
 
 @dataclass(frozen=True)

@@ -41,13 +41,16 @@ from __future__ import annotations
 
 import os
 import re
+from dataclasses import dataclass
+from typing import Callable
 
 from ..config import ScenarioError, Section
 from .dem import Dem, fractal_dem, load_geotiff_dem, matplotlib_sample_dem, resample
 from .illumination import Sun
 from .texture import BAND_NAMES, OrthoTexture, ProceduralTexture
 
-__all__ = ["dem_from_config", "knowledge_dem_from_config", "texture_from_config", "sun_from_config"]
+__all__ = ["dem_from_config", "knowledge_dem_from_config", "texture_from_config", "sun_from_config",
+           "TerrainSource", "DEM_SOURCES", "TEXTURE_SOURCES"]
 
 _PARAM = re.compile(r"^([A-Za-z_][A-Za-z0-9_.\[\]]*): (.*)$")
 
@@ -99,34 +102,49 @@ def dem_from_config(section: Section, *, base_dir, seed: int, x_range_m, y_range
     ScenarioError
         Naming the offending key.
     """
-    kind = section.string("kind", "fractal", choices=("fractal", "geotiff", "matplotlib_sample"))
-    if kind == "fractal":
-        res = section.number("resolution_m", 10.0, ge=0.1, le=10000.0)
-        relief = section.number("relief_m", 150.0, ge=0, le=20000.0)  # Earth: < 9 km
-        rough = section.number("roughness", 0.7, gt=0, le=1)
-        section.finish()
-        try:
-            return fractal_dem(x_range_m=x_range_m, y_range_m=y_range_m, resolution_m=res, relief_m=relief,
-                               roughness=rough, seed=seed)
-        except ValueError as exc:
-            raise _reraise(section, exc) from None
+    source = DEM_SOURCES[section.string("kind", "fractal", choices=tuple(DEM_SOURCES))]
+    return source.from_config(section, base_dir=base_dir, seed=seed, x_range_m=x_range_m, y_range_m=y_range_m)
+
+
+def _fractal_dem(section: Section, *, base_dir, seed: int, x_range_m, y_range_m) -> Dem:
+    """``kind = "fractal"``: fractional-Brownian relief over exactly the scene's extent."""
+    res = section.number("resolution_m", 10.0, ge=0.1, le=10000.0)
+    relief = section.number("relief_m", 150.0, ge=0, le=20000.0)  # Earth: < 9 km
+    rough = section.number("roughness", 0.7, gt=0, le=1)
+    section.finish()
+    try:
+        return fractal_dem(x_range_m=x_range_m, y_range_m=y_range_m, resolution_m=res, relief_m=relief,
+                           roughness=rough, seed=seed)
+    except ValueError as exc:
+        raise _reraise(section, exc) from None
+
+
+def _geotiff_dem(section: Section, *, base_dir, seed: int, x_range_m, y_range_m) -> Dem:
+    """``kind = "geotiff"``: a DEM file, centred on the scene, optionally resampled."""
     res = section.number("resolution_m", None, gt=0)
-    if kind == "geotiff":
-        path = _resolve(section, "path", base_dir)
-        nodata = section.number("nodata", None)
-        section.finish()
-        try:
-            dem = load_geotiff_dem(path, nodata=nodata)
-        except ValueError as exc:
-            raise _reraise(section, exc) from None
-        where = "path"
-    else:
-        section.finish()
-        try:
-            dem = matplotlib_sample_dem()
-        except ValueError as exc:
-            raise section.error("kind", str(exc)) from None
-        where = "kind"
+    path = _resolve(section, "path", base_dir)
+    nodata = section.number("nodata", None)
+    section.finish()
+    try:
+        dem = load_geotiff_dem(path, nodata=nodata)
+    except ValueError as exc:
+        raise _reraise(section, exc) from None
+    return _fit_to_scene(section, dem, res, "path", x_range_m, y_range_m)
+
+
+def _sample_dem(section: Section, *, base_dir, seed: int, x_range_m, y_range_m) -> Dem:
+    """``kind = "matplotlib_sample"``: matplotlib's sample DEM (Jacksboro), centred on the scene."""
+    res = section.number("resolution_m", None, gt=0)
+    section.finish()
+    try:
+        dem = matplotlib_sample_dem()
+    except ValueError as exc:
+        raise section.error("kind", str(exc)) from None
+    return _fit_to_scene(section, dem, res, "kind", x_range_m, y_range_m)
+
+
+def _fit_to_scene(section: Section, dem: Dem, res, where: str, x_range_m, y_range_m) -> Dem:
+    """Resample a read DEM (when ``resolution_m`` is given), check it covers the scene, crop it."""
     if res is not None:
         try:
             dem = resample(dem, res)
@@ -142,6 +160,23 @@ def dem_from_config(section: Section, *, base_dir, seed: int, x_range_m, y_range
                                    f"the scene needs x [{x_range_m[0]:.0f}, {x_range_m[1]:.0f}] m, "
                                    f"y [{y_range_m[0]:.0f}, {y_range_m[1]:.0f}] m")
     return dem.crop(x_range_m, y_range_m)
+
+
+@dataclass(frozen=True)
+class TerrainSource:
+    """One ``kind`` of ``[scene.dem]`` or ``[scene.texture]``: what it is and its builder from the table."""
+
+    name: str
+    description: str
+    from_config: Callable
+
+
+#: ``[scene.dem] kind`` → source
+DEM_SOURCES: dict[str, TerrainSource] = {s.name: s for s in (
+    TerrainSource("fractal", "fractional-Brownian relief (seeded)", _fractal_dem),
+    TerrainSource("geotiff", "a GeoTIFF DEM file", _geotiff_dem),
+    TerrainSource("matplotlib_sample", "matplotlib's sample DEM (Jacksboro, 10 m)", _sample_dem),
+)}
 
 
 def knowledge_dem_from_config(section: Section, *, truth: Dem, seed: int) -> Dem:
@@ -200,29 +235,37 @@ def texture_from_config(section: Section, *, base_dir, seed: int, sun: Sun | Non
     -------
     ProceduralTexture or OrthoTexture
     """
-    kind = section.string("kind", "procedural", choices=("procedural", "orthoimage"))
+    kind = section.string("kind", "procedural", choices=tuple(TEXTURE_SOURCES))
     texel = section.number("texel_m", 1.0, ge=0.01, le=1000.0)
     bands = section.strings("bands", None, choices=BAND_NAMES)
     if bands is not None and len(set(bands)) != len(bands):
         raise section.error("bands", f"repeated band in {list(bands)}")
     if bands is None and default_bands is not None:
         bands = tuple(b for b in BAND_NAMES if b in set(default_bands))
-    if kind == "procedural":
-        sun = sun or Sun()
-        kw = dict(
-            water_fraction=section.number("water_fraction", 0.05, ge=0, le=1),
-            cloud_fraction=section.number("cloud_fraction", 0.0, ge=0, le=1),
-            urban_fraction=section.number("urban_fraction", 0.08, ge=0, le=1),
-            forest_fraction=section.number("forest_fraction", 0.25, ge=0, le=1),
-            field_size_m=section.number("field_size_m", 200.0, gt=10, le=1e5),
-            cloud_height_m=section.number("cloud_height_m", 1500.0, gt=0, le=20000.0),
-        )
-        section.finish()
-        try:
-            return ProceduralTexture(seed=seed, bands=BAND_NAMES if bands is None else bands, texel_m=texel,
-                                     sun_elevation_deg=sun.elevation_deg, sun_azimuth_deg=sun.azimuth_deg, **kw)
-        except ValueError as exc:
-            raise _reraise(section, exc) from None
+    return TEXTURE_SOURCES[kind].from_config(section, base_dir=base_dir, seed=seed, sun=sun, bands=bands, texel=texel)
+
+
+def _procedural_texture(section: Section, *, base_dir, seed: int, sun, bands, texel: float):
+    """``kind = "procedural"``: land classes, fields, towns, water and clouds synthesised from the seed."""
+    sun = sun or Sun()
+    kw = dict(
+        water_fraction=section.number("water_fraction", 0.05, ge=0, le=1),
+        cloud_fraction=section.number("cloud_fraction", 0.0, ge=0, le=1),
+        urban_fraction=section.number("urban_fraction", 0.08, ge=0, le=1),
+        forest_fraction=section.number("forest_fraction", 0.25, ge=0, le=1),
+        field_size_m=section.number("field_size_m", 200.0, gt=10, le=1e5),
+        cloud_height_m=section.number("cloud_height_m", 1500.0, gt=0, le=20000.0),
+    )
+    section.finish()
+    try:
+        return ProceduralTexture(seed=seed, bands=BAND_NAMES if bands is None else bands, texel_m=texel,
+                                 sun_elevation_deg=sun.elevation_deg, sun_azimuth_deg=sun.azimuth_deg, **kw)
+    except ValueError as exc:
+        raise _reraise(section, exc) from None
+
+
+def _ortho_texture(section: Section, *, base_dir, seed: int, sun, bands, texel: float):
+    """``kind = "orthoimage"``: an image file whose channels are mapped to bands."""
     path = _resolve(section, "path", base_dir)
     ch = section.section("channels", required=True)
     channels = {}
@@ -242,3 +285,10 @@ def texture_from_config(section: Section, *, base_dir, seed: int, sun: Sun | Non
                             output_bands=None if bands is None else tuple(bands))
     except ValueError as exc:
         raise _reraise(section, exc, {"bands": "channels", "output_bands": "bands"}) from None
+
+
+#: ``[scene.texture] kind`` → source
+TEXTURE_SOURCES: dict[str, TerrainSource] = {s.name: s for s in (
+    TerrainSource("procedural", "synthesised land cover (seeded)", _procedural_texture),
+    TerrainSource("orthoimage", "an orthoimage file", _ortho_texture),
+)}
