@@ -29,6 +29,9 @@ Images are ``(line, column)`` float arrays; pixel centres at integers.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Callable
+
 import numpy as np
 from scipy import ndimage
 
@@ -44,9 +47,10 @@ __all__ = [
     "grid_points",
     "spread_quality_subset",
     "select_points",
+    "SelectionMethod",
+    "SELECTION_METHODS",
 ]
 
-_METHODS = ("grid", "double_gradient", "spread")
 #: antisymmetric 5-point gradient (the matcher's), 1/px
 _GRADIENT = np.array([1.0, -8.0, 0.0, 8.0, -1.0]) / 12.0
 #: Immerkaer's noise mask: difference of two Laplacians, blind to planes
@@ -515,8 +519,8 @@ def select_points(image, *, method="grid", per_line=20, window=(3, 31), search=(
     lines, cols : ndarray of float, shape (N,)
         Points (px, pixel centres), sorted by line then column.
     """
-    if method not in _METHODS:
-        raise ValueError(f"method: expected one of {_METHODS}, got {method!r}")
+    if method not in SELECTION_METHODS:
+        raise ValueError(f"method: expected one of {tuple(SELECTION_METHODS)}, got {method!r}")
     img = _as_image(image)
     n_lines, n_cols = img.shape
     window = _check_window(window)
@@ -559,25 +563,52 @@ def select_points(image, *, method="grid", per_line=20, window=(3, 31), search=(
     usable[:, n_cols - mc:] = False
     c_lo, c_hi = mc, n_cols - 1 - mc
 
-    if method == "grid":
-        cols = np.unique(np.rint(np.linspace(c_lo, c_hi, int(per_line))))
-        li = np.flatnonzero(rows)
-        ll, cc = np.meshgrid(li, cols.astype(np.int64), indexing="ij")
-        keep = usable[ll, cc]
-        return ll[keep].astype(float), cc[keep].astype(float)
+    area = _Area(img=img, usable=usable, rows=rows, std_l=std_l, std_c=std_c, c_lo=c_lo, c_hi=c_hi,
+                 per_line=int(per_line), noise_std=noise_std, threshold=threshold)
+    return SELECTION_METHODS[method].pick(area)
 
-    if method == "double_gradient":
-        li, ci, score = double_gradient_points(img, threshold=threshold, noise_std=noise_std,
-                                               min_distance=max(1, (c_hi - c_lo) // (4 * int(per_line))),
-                                               mask=~usable)
-        keep = spread_quality_subset(li, ci, score, per_line=per_line, column_range=(c_lo, c_hi))
-        return li[keep], ci[keep]
 
-    # spread: best a-priori precision in each column bin of each line
-    quality = np.where(usable, -np.maximum(std_l, std_c), -np.inf)
-    li = np.flatnonzero(rows)
+@dataclass
+class _Area:
+    """What a selection method picks from: the usable windows of the image and the column range."""
+
+    img: np.ndarray
+    usable: np.ndarray
+    rows: np.ndarray
+    std_l: np.ndarray
+    std_c: np.ndarray
+    c_lo: int
+    c_hi: int
+    per_line: int
+    noise_std: float
+    threshold: float | None
+
+
+def _grid_points(area: _Area) -> tuple[np.ndarray, np.ndarray]:
+    """``grid``: fixed columns, evenly spread, on every usable line."""
+    cols = np.unique(np.rint(np.linspace(area.c_lo, area.c_hi, area.per_line)))
+    li = np.flatnonzero(area.rows)
+    ll, cc = np.meshgrid(li, cols.astype(np.int64), indexing="ij")
+    keep = area.usable[ll, cc]
+    return ll[keep].astype(float), cc[keep].astype(float)
+
+
+def _double_gradient_points(area: _Area) -> tuple[np.ndarray, np.ndarray]:
+    """``double_gradient``: corners (patent's double-gradient criterion), the best spread along each line."""
+    li, ci, score = double_gradient_points(area.img, threshold=area.threshold, noise_std=area.noise_std,
+                                           min_distance=max(1, (area.c_hi - area.c_lo) // (4 * area.per_line)),
+                                           mask=~area.usable)
+    keep = spread_quality_subset(li, ci, score, per_line=area.per_line, column_range=(area.c_lo, area.c_hi))
+    return li[keep], ci[keep]
+
+
+def _spread_points(area: _Area) -> tuple[np.ndarray, np.ndarray]:
+    """``spread``: the best a-priori precision in each column bin of each line."""
+    quality = np.where(area.usable, -np.maximum(area.std_l, area.std_c), -np.inf)
+    li = np.flatnonzero(area.rows)
+    c_lo, c_hi = area.c_lo, area.c_hi
     span = c_hi - c_lo + 1
-    nb = min(int(per_line), span)
+    nb = min(area.per_line, span)
     bw = -(-span // nb)  # ceil
     q = np.full((li.size, nb * bw), -np.inf)
     q[:, :span] = quality[li, c_lo:c_hi + 1]
@@ -587,6 +618,26 @@ def select_points(image, *, method="grid", per_line=20, window=(3, 31), search=(
     cols = c_lo + np.arange(nb)[None, :] * bw + best
     ll = np.broadcast_to(li[:, None], cols.shape)
     return ll[ok].astype(float), cols[ok].astype(float)
+
+
+@dataclass(frozen=True)
+class SelectionMethod:
+    """A point-selection method: how it picks, and how many lines of context a block needs around it."""
+
+    name: str
+    description: str
+    pick: Callable
+    context_lines: Callable = lambda n_cols, per_line: 32
+
+
+#: ``restoration.selection`` → method
+SELECTION_METHODS: dict[str, SelectionMethod] = {m.name: m for m in (
+    SelectionMethod("grid", "fixed, evenly spread columns on every usable line", _grid_points),
+    SelectionMethod("double_gradient", "corners by the double-gradient criterion, spread along the line",
+                    _double_gradient_points,
+                    context_lines=lambda n_cols, per_line: max(32, n_cols // (2 * int(per_line)) + 16)),
+    SelectionMethod("spread", "best a-priori precision in each column bin", _spread_points),
+)}
 
 
 def select_points_in_blocks(image, *, block_lines: int = 512, noise_std=None, line_mask=None, mask=None,
@@ -612,9 +663,9 @@ def select_points_in_blocks(image, *, block_lines: int = 512, noise_std=None, li
     n_lines, n_cols = np.shape(image)
     if noise_std is None:
         noise_std = estimate_image_noise(image)
-    context = 32
-    if method == "double_gradient":
-        context = max(context, n_cols // (2 * int(per_line)) + 16)
+    if method not in SELECTION_METHODS:
+        raise ValueError(f"method: expected one of {tuple(SELECTION_METHODS)}, got {method!r}")
+    context = SELECTION_METHODS[method].context_lines(n_cols, per_line)
     if n_lines <= block_lines + 2 * context:
         return select_points(image, noise_std=noise_std, line_mask=line_mask, mask=mask, method=method,
                              per_line=per_line, **options)

@@ -7,6 +7,7 @@ from simsat.config import ScenarioError, Section
 from simsat.validation import register_table_check
 
 from .integration import check_options, integration_method
+from .selection import SELECTION_METHODS
 from .synthesis import AXES
 
 __all__ = ["RestorationSettings", "restoration_settings", "settings_dict"]
@@ -51,7 +52,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
         if not isinstance(pairs, list) or not all(isinstance(p, str) and p.count("/") == 1 for p in pairs):
             raise sec.error("pairs", f"must be \"auto\" or an array of \"AHEAD/BEHIND\" band names, got {pairs!r}")
     s.pairs = pairs
-    s.selection = sec.string("selection", s.selection, choices=("grid", "double_gradient", "spread"))
+    s.selection = sec.string("selection", s.selection, choices=tuple(SELECTION_METHODS))
     s.points_per_line = sec.integer("points_per_line", s.points_per_line, ge=3, le=1000)
     s.texture_max_std_px = sec.number("texture_max_std_px", s.texture_max_std_px, gt=0)
     wl = sec.integer("window_lines", s.window[0], ge=1, le=63)
