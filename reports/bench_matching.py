@@ -162,46 +162,65 @@ def _run(method, data, window, search, repeat):
     baselines extract their windows (A at the point, B at the prediction)
     inside the timed loop, as the batched matcher does inside its call.
     """
-    la, ca = data["lines"], data["cols"]
-    img_a, img_b = data["image_a"], data["image_b"]
-    h2, w2 = window[0] // 2, window[1] // 2
-    li, ci = np.rint(la).astype(int), np.rint(ca).astype(int)
-    est = np.empty((la.size, 2))
-    valid = np.ones(la.size, dtype=bool)
-    best = np.inf
+    if method in _OURS:
+        run = _run_ours
+    elif method in _BASELINES:
+        run = _BASELINES[method]
+    else:
+        raise ValueError(f"methods: unknown method {method!r}, expected a subset of {METHODS}")
+    best, est, valid = np.inf, None, None
     for _ in range(repeat):
-        if method in _OURS:
-            meth, backend, threads = _OURS[method]
-            with _numba_threads(threads):
-                t0 = time.perf_counter()
-                res = match_points(img_a, img_b, la, ca, la, ca, window=window, search=search,
-                                   method=meth, backend=backend)
-                best = min(best, time.perf_counter() - t0)
-            est = np.stack([res.line_b - la, res.col_b - ca], axis=1)
-            valid = res.valid
-        elif method == "skimage":
-            from skimage.registration import phase_cross_correlation
-
-            t0 = time.perf_counter()
-            for i in range(la.size):
-                l, c = li[i], ci[i]
-                s = phase_cross_correlation(img_a[l - h2:l + h2 + 1, c - w2:c + w2 + 1],
-                                            img_b[l - h2:l + h2 + 1, c - w2:c + w2 + 1], upsample_factor=100)[0]
-                est[i] = -s  # skimage returns the shift that registers B onto A
-            best = min(best, time.perf_counter() - t0)
-        elif method == "opencv":
-            import cv2
-
-            t0 = time.perf_counter()
-            for i in range(la.size):
-                l, c = li[i], ci[i]
-                (x, y), _ = cv2.phaseCorrelate(img_a[l - h2:l + h2 + 1, c - w2:c + w2 + 1],
-                                               img_b[l - h2:l + h2 + 1, c - w2:c + w2 + 1])
-                est[i] = (y, x)
-            best = min(best, time.perf_counter() - t0)
-        else:
-            raise ValueError(f"methods: unknown method {method!r}, expected a subset of {METHODS}")
+        t, est, valid = run(method, data, window, search)
+        best = min(best, t)
     return est, valid, best
+
+
+def _run_ours(method, data, window, search):
+    """:func:`restore.matching.match_points` as :data:`_OURS` says: (seconds, shifts, valid)."""
+    la, ca = data["lines"], data["cols"]
+    meth, backend, threads = _OURS[method]
+    with _numba_threads(threads):
+        t0 = time.perf_counter()
+        res = match_points(data["image_a"], data["image_b"], la, ca, la, ca, window=window, search=search,
+                           method=meth, backend=backend)
+        t = time.perf_counter() - t0
+    return t, np.stack([res.line_b - la, res.col_b - ca], axis=1), res.valid
+
+
+def _windows(data, window):
+    """Per point: the window of A at the point and of B at the same place (the prediction)."""
+    h2, w2 = window[0] // 2, window[1] // 2
+    li, ci = np.rint(data["lines"]).astype(int), np.rint(data["cols"]).astype(int)
+    for l, c in zip(li, ci):
+        yield (data["image_a"][l - h2:l + h2 + 1, c - w2:c + w2 + 1],
+               data["image_b"][l - h2:l + h2 + 1, c - w2:c + w2 + 1])
+
+
+def _run_skimage(method, data, window, search):
+    """``skimage.registration.phase_cross_correlation`` per point (upsampled ×100)."""
+    from skimage.registration import phase_cross_correlation  # optional baseline
+
+    est = np.empty((data["lines"].size, 2))
+    t0 = time.perf_counter()
+    for i, (wa, wb) in enumerate(_windows(data, window)):
+        est[i] = -phase_cross_correlation(wa, wb, upsample_factor=100)[0]  # the shift that registers B onto A
+    return time.perf_counter() - t0, est, np.ones(est.shape[0], dtype=bool)
+
+
+def _run_opencv(method, data, window, search):
+    """``cv2.phaseCorrelate`` per point."""
+    import cv2  # optional baseline
+
+    est = np.empty((data["lines"].size, 2))
+    t0 = time.perf_counter()
+    for i, (wa, wb) in enumerate(_windows(data, window)):
+        (x, y), _ = cv2.phaseCorrelate(wa, wb)
+        est[i] = (y, x)
+    return time.perf_counter() - t0, est, np.ones(est.shape[0], dtype=bool)
+
+
+#: the other libraries' matchers the bench compares ours with: name → runner
+_BASELINES = {"skimage": _run_skimage, "opencv": _run_opencv}
 
 
 class _numba_threads:

@@ -153,8 +153,8 @@ def interpolate_gaps(theta, *, max_gap: int, order: int = 32, method: str = "ar"
     ndarray
         A copy of ``theta`` with the short interior gaps filled.
     """
-    if method not in ("ar", "linear"):
-        raise ValueError(f"method: must be 'ar' or 'linear', got {method!r}")
+    if method not in _GAP_FILLERS:
+        raise ValueError(f"method: must be one of {', '.join(repr(m) for m in _GAP_FILLERS)}, got {method!r}")
     if int(max_gap) < 0:
         raise ValueError(f"max_gap: must be >= 0, got {max_gap}")
     th = np.array(theta, dtype=np.float64)
@@ -165,10 +165,18 @@ def interpolate_gaps(theta, *, max_gap: int, order: int = 32, method: str = "ar"
     gaps = [(a, b) for a, b in nan_runs(~fin) if a > first and b <= last and b - a <= max_gap]
     if not gaps:
         return th
-    if method == "linear":
-        for a, b in gaps:
-            th[a:b] = np.interp(np.arange(a, b), [a - 1, b], [th[a - 1], th[b]])
-        return th
+    return _GAP_FILLERS[method](th, gaps, order, fin)
+
+
+def _fill_linear(th: np.ndarray, gaps: list, order: int, fin: np.ndarray) -> np.ndarray:
+    """Linear interpolation across each gap (in place)."""
+    for a, b in gaps:
+        th[a:b] = np.interp(np.arange(a, b), [a - 1, b], [th[a - 1], th[b]])
+    return th
+
+
+def _fill_ar(th: np.ndarray, gaps: list, order: int, fin: np.ndarray) -> np.ndarray:
+    """AR prediction from both edges, blended with a raised cosine (in place; linear where it cannot)."""
     coef = _ar_fit(th, order, nan_runs(fin))
     for a, b in gaps:
         left = th[max(0, a - order):a]
@@ -186,3 +194,7 @@ def interpolate_gaps(theta, *, max_gap: int, order: int = 32, method: str = "ar"
         wgt = 0.5 * (1 + np.cos(np.pi * (np.arange(L) + 1) / (L + 1)))
         th[a:b] = wgt * fwd[order:] + (1 - wgt) * bwd[order:][::-1]
     return th
+
+
+#: ``interpolate_gaps(method=...)`` → filler
+_GAP_FILLERS = {"ar": _fill_ar, "linear": _fill_linear}
