@@ -309,68 +309,20 @@ def _transfer_section(pg: _Page, run: D.RunData, sc: dict, f_max: float, integra
         pg.note("No restoration: no integration to show.")
         return
     method = sc["method"] or ""
-    opts = dict(sc.get("integration_options") or {})
     axes = sc["restored_axes"] or list(D.AXES)
-    te = run.line_period_s
-    n = run.time.size
-    probes: dict = {}
-    analytic: dict = {}
-    frozen_any = False
     if integrate is not None:
-        per_call = _integration_call_s(run)
-        expected = per_call * (len(taus) + 2) * len(axes)
+        expected = _integration_call_s(run) * (len(taus) + 2) * len(axes)
         if expected > max_integration_s:
             report_notes.append(f"integration transfer not probed: ~{expected:.0f} s expected")
             integrate = None
             why_not = f"re-running it would take ~{expected:.0f} s"
-    gaps_txt: list = []
-    if integrate is not None:
-        shared = None
-        for a in axes:
-            fz = D.axis_integration(run, a)
-            if fz["error"]:
-                pg.note(_e(f"{a}: re-running the integration failed: {fz['error']}"))
-                continue
-            if not fz["frozen"] and shared is not None:
-                probes[a] = shared
-            else:
-                corr = np.asarray(run.restoration[f"correction_{a}"].values, dtype=np.float64)
-                amp = float(np.nanstd(corr)) if np.isfinite(corr).any() and np.nanstd(corr) > 0 else 1e-6
-                probes[a] = D.integration_probe(taus, te, n, integrate=integrate, method=method or None,
-                                                options=fz["options"], pair_names=names, amplitude_rad=amp)
-                if not fz["frozen"]:
-                    shared = probes[a]
-                for label, msg in probes[a]["errors"].items():
-                    pg.note(_e(f"{a}: integrating {'all pairs' if label == 'fused' else label + ' alone'} "
-                               f"failed: {msg}"))
-            if fz["frozen"]:
-                frozen_any = True
-                f = probes[a]["freq_hz"]
-                an = {"freq_hz": f, "label": "Wiener with the frozen PSD prior and noise (probe's resolution)",
-                      "gain_joint": D.probe_window_gain(f, taus, fz["spectrum"], te, n)}
-                sig = np.broadcast_to(np.atleast_1d(fz["spectrum"]["noise_std"]), (len(taus),))
-                for j, nm in enumerate(names):
-                    an[f"gain_{nm}"] = D.probe_window_gain(f, [taus[j]], {**fz["spectrum"], "noise_std": sig[j:j + 1]},
-                                                           te, n)
-                analytic[a] = an
-                band = (f >= 1.0) & (f <= (f_max or f[-1])) & np.isfinite(probes[a]["gain_fused"])
-                if band.any():
-                    dev = np.abs(an["gain_joint"][band] - probes[a]["gain_fused"][band])
-                    gaps_txt.append(f"{a}: median {np.median(dev):.3f}, largest {np.max(dev):.2f}")
-    else:
+    if integrate is None:
         pg.note(_e(f"The integration cannot be re-run ({why_not}); only an analytic Wiener reference is drawn."))
-    k = D.regularisation_k(method or None, opts)
-    for a in axes:
-        if a in analytic or (a in probes and k is None):
-            continue
-        f = probes[a]["freq_hz"] if a in probes and probes[a]["freq_hz"].size else \
-            np.fft.rfftfreq(max(n, 4096), te)
-        kk = k if k is not None else 0.1
-        an = {"freq_hz": f, "label": f"Wiener k = {kk:g}" + ("" if k is not None else ", illustration"),
-              "gain_joint": D.analytic_joint_gain(f, taus, kk)}
-        for j, nm in enumerate(names):
-            an[f"gain_{nm}"] = D.analytic_chain_gain(f, taus[j], kk)
-        analytic[a] = an
+    tc = D.transfer_curves(run, taus, names, axes, method=method, options=dict(sc.get("integration_options") or {}),
+                           integrate=integrate, f_max=f_max)
+    for msg in tc["notes"]:
+        pg.note(_e(msg))
+    probes, analytic, frozen_any, gaps_txt = tc["probes"], tc["analytic"], tc["frozen"], tc["gaps"]
     measured = D.measured_transfer(run)
     fig, axs = RP.transfer_figure(len(axes))
     for i, (ax, a) in enumerate(zip(axs, axes)):
