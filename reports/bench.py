@@ -11,12 +11,25 @@ from pathlib import Path
 
 import numpy as np
 
-from simsat.product import atomic_write_json
+from reports import bench_integration, bench_matching
+from reports.metrics import (
+    attitude_errors,
+    attitude_misregistration,
+    misregistration_floor,
+)
+from restore.pipeline import restore_run
+from simsat.product import atomic_write_json, read_product, read_truth
+from simsat.scenario import load_scenario
+from simsat.simulate import build_world, make_renderer, simulate
 
 #: where the benches write their scratch runs (rendered products they restore and score)
 SCRATCH_DIR = Path("bench") / "scratch"
 
-__all__ = ["run_bench", "format_result", "bench_render", "bench_restore", "bench_memory", "SCRATCH_DIR"]
+__all__ = ["BenchError", "run_bench", "format_result", "bench_render", "bench_restore", "bench_memory", "SCRATCH_DIR"]
+
+
+class BenchError(RuntimeError):
+    """A benchmark cannot run (a measured command failed); the message says which and why."""
 
 
 def _peak_rss_gb() -> float:
@@ -25,9 +38,6 @@ def _peak_rss_gb() -> float:
 
 def _render_measure(scenario: str, lines: int | None, full: bool) -> dict:
     """Render a scenario (or its first ``lines`` lines) and measure throughput vs the ray_intersect ceiling."""
-    from simsat.scenario import load_scenario
-    from simsat.simulate import build_world, make_renderer
-
     over = {"acquisition": {"lines": lines}} if lines else None
     t0 = _time.perf_counter()
     sc = load_scenario(scenario, overrides=over)
@@ -71,7 +81,6 @@ def bench_render(*, scenario: str | None = None, lines: int | None = None, full_
         line = [x for x in p.stdout.splitlines() if x.startswith("@@")]
         if p.returncode == 0 and line:
             full = json.loads(line[0][2:])
-            from simsat.scenario import load_scenario
             total_lines = load_scenario("phr_full", check_models=False).acquisition.lines
             full["full_lines"] = total_lines
             full["extrapolated_full_render_s"] = full["render_wall_s"] * total_lines / full["lines"]
@@ -87,8 +96,7 @@ def bench_render(*, scenario: str | None = None, lines: int | None = None, full_
 
 def bench_restore(*, scenario: str | None = None, lines: int | None = None, seed: int = 0) -> dict:
     """Differential-level CNES case (all integration methods) + end-to-end on a rendered scenario."""
-    from reports.bench_integration import bench_integration
-    out = {"differential_cnes_case": bench_integration(seed=seed)}
+    out = {"differential_cnes_case": bench_integration.bench_integration(seed=seed)}
     out["end_to_end"] = bench_end_to_end(scenario=scenario or "phr_cmg", lines=lines)
     # time against image length: two shorter acquisitions of the same scenario
     n = out["end_to_end"]["lines"]
@@ -109,13 +117,6 @@ def _nan_runs(x) -> list:
 def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | None = None,
                      overrides: dict | None = None, tag: str = "") -> dict:
     """Render, restore, and score against truth with the accuracy metric of docs/design.md."""
-    from restore.pipeline import restore_run
-    from simsat.product import read_truth
-    from simsat.scenario import load_scenario
-    from simsat.simulate import simulate
-
-    from .metrics import attitude_errors, attitude_misregistration, misregistration_floor
-
     over = dict(overrides or {})
     if lines:
         over["acquisition"] = {"lines": lines}
@@ -138,7 +139,6 @@ def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | 
     errs = attitude_errors(rest, truth)
     floor = {}
     if res.misregistration:
-        from simsat.product import read_product
         floor = misregistration_floor(read_product(rd), truth, res.pairs, res.settings)
     return {"scenario": sc.name, "lines": sc.acquisition.lines, "render_s": t_render, "restore_s": t_restore,
             "errors": errs, "misregistration": res.misregistration,
@@ -165,8 +165,6 @@ def bench_scaling(*, scenario: str = "phr_cmg", sizes=(1000, 2000), known: dict 
     ``restore_s = a + b * lines`` with the largest relative deviation of a
     point from it.
     """
-    from restore.pipeline import restore_run
-
     runs = []
     for n in sizes:
         r = bench_end_to_end(scenario=scenario, lines=n)
@@ -208,10 +206,8 @@ def _measured_command(argv: list) -> dict:
     wall = _time.perf_counter() - t0
     peak = [ln for ln in p.stderr.splitlines() if ln.startswith("SIMSAT_PEAK_KB")]
     if p.returncode != 0 or not peak:
-        from simsat_cli import CliError
-
         said = [ln for ln in p.stderr.splitlines() if ln.strip() and not ln.startswith("SIMSAT_PEAK_KB")]
-        raise CliError(f"bench memory: simsat {' '.join(argv)} failed (exit {p.returncode}): "
+        raise BenchError(f"bench memory: simsat {' '.join(argv)} failed (exit {p.returncode}): "
                        f"{(said or ['(no message)'])[-1].strip()}")
     return {"wall_s": wall, "peak_rss_gb": int(peak[-1].split()[1]) / 1024 ** 2}
 
@@ -260,11 +256,9 @@ def run_bench(what: str, *, scenario: str | None = None, out: str | None = None,
     elif what == "restore":
         result = bench_restore(scenario=scenario, lines=lines, seed=seed)
     elif what == "matching":
-        from reports.bench_matching import bench_matching
-        result = bench_matching(seed=seed)
+        result = bench_matching.bench_matching(seed=seed)
     elif what == "integration":
-        from reports.bench_integration import bench_integration
-        result = bench_integration(seed=seed)
+        result = bench_integration.bench_integration(seed=seed)
     elif what == "memory":
         result = bench_memory(scenario=scenario, lines=lines)
     else:
@@ -361,13 +355,10 @@ def format_result(what: str, result: dict) -> str:
     elif what in ("restore", "integration", "matching"):
         try:
             if what == "matching":
-                from reports.bench_matching import format_table
-                return format_table(r)
+                return bench_matching.format_table(r)
             if what == "integration":
-                from reports.bench_integration import format_table
-                return format_table(r)
-            from reports.bench_integration import format_table
-            lines.append(format_table(r["differential_cnes_case"]))
+                return bench_integration.format_table(r)
+            lines.append(bench_integration.format_table(r["differential_cnes_case"]))
             for key, title in (("end_to_end", "end to end"), ("clouds_30", "robustness, 30 % cloud cover:")):
                 if key in r:
                     lines.append("")

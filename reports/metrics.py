@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from restore.correction import correct_bands, misregistration
+from simsat.attitude import AttitudeSeries
 from simsat.units import AXES
 
 __all__ = ["error_stats", "attitude_errors", "truth_at", "attitude_misregistration", "misregistration_floor"]
@@ -153,9 +155,6 @@ def misregistration_floor(product, truth, pairs, settings) -> dict:
         ``{pair: {after_px, after_line_px, after_col_px, after_noise_px,
         after_signal_px, ...}}`` as :func:`restore.correction.misregistration`.
     """
-    from restore.correction import correct_bands, misregistration
-    from simsat.attitude import AttitudeSeries
-
     series = AttitudeSeries(time=np.asarray(truth["time"].values, dtype=np.float64),
                             **{a: np.asarray(truth[a].values, dtype=np.float64) for a in AXES})
     import tempfile

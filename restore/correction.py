@@ -11,6 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from simsat.product import clamped_attitude
+
+from .matching import match_points_in_blocks
+
 __all__ = ["resampling_grid", "correct_bands", "correct_band_block", "SPLINE_MARGIN_LINES", "misregistration", "per_line_shift_rms", "rank_within_line", "line_median"]
 
 
@@ -27,7 +31,6 @@ def resampling_grid(product, band: str, restored, *, column_step: int = 16, line
     sl = slice(0, n_lines) if lines is None else slice(*lines.indices(n_lines)[:2])
     cols = np.unique(np.r_[np.arange(0, det.pixels, column_step), det.pixels - 1]).astype(np.float64)
     sm_k = product.sensor_model()
-    from simsat.product import clamped_attitude
     sm_r = product.sensor_model(attitude=clamped_attitude(restored))
     L, C = np.meshgrid(np.arange(sl.start, sl.stop, dtype=np.float64), cols, indexing="ij")
     g = sm_k.direct_location(band, L, C)
@@ -330,8 +333,6 @@ def misregistration(product, corrected, pairs, settings) -> dict:
     (split-half) estimate: ``after_signal_px`` is the figure to compare with
     a requirement, ``after_px`` includes the measurement noise.
     """
-    from .matching import match_points_in_blocks
-
     sm = product.sensor_model()
     out = {}
     n_lines = product.time.size

@@ -14,7 +14,13 @@ import os
 from pathlib import Path
 
 from simsat.config import Section
-from simsat.product import Product, ProductError, atomic_write_dataset, read_product, temporary_path
+from simsat.product import (
+    Product,
+    ProductError,
+    atomic_write_dataset,
+    read_product,
+    temporary_path,
+)
 from simsat.rundir import RunLock, content_id
 
 from .errors import RestorationError

@@ -21,7 +21,13 @@ from .matching import match_points, support_margin
 from .result import IntegrationRecord, PairData
 from .selection import select_points_in_blocks
 from .settings import RestorationSettings
-from .synthesis import AXES, drop_sparse, fill_short_gaps, instant_synthesis, window_compensation
+from .synthesis import (
+    AXES,
+    drop_sparse,
+    fill_short_gaps,
+    instant_synthesis,
+    window_compensation,
+)
 
 __all__ = ["auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "select_candidates", "match_candidates",
            "match_pair", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
@@ -381,6 +387,8 @@ def attitude_series(time, values: dict) -> AttitudeSeries:
 
 def ncc_kernel_cold() -> bool:
     """Whether the compiled NCC kernel is not loaded yet in this process (first use: cache load or compile)."""
-    from ._ncc_kernel import match_ncc  # Numba: heavy, imported only when matching with it
+    from ._ncc_kernel import (
+        match_ncc,  # Numba: heavy, imported only when matching with it
+    )
 
     return not match_ncc.signatures

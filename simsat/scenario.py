@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import terrain
+from .attitude import AttitudeModel
 from .config import ScenarioError, Section
 from .instrument import Instrument, instrument_from_config
 from .platform import Platform, platform_from_config
@@ -94,7 +96,6 @@ class Scenario:
 
     # -- model builders (each builds on demand; deterministic per seed) --------
     def attitude_model(self):
-        from .attitude import AttitudeModel
         nominal = (self.platform.off_nadir_roll_rad, self.platform.off_nadir_pitch_rad, 0.0)
         sec = self.section("attitude")
         margin = 0.05 + self.instrument.line_period_s * 4
@@ -103,7 +104,6 @@ class Scenario:
 
     def dems(self):
         """(true DEM, DEM known by the ground segment)."""
-        from . import terrain
         sec = self.section("scene")
         dsec = sec.section("dem")
         dem = terrain.dem_from_config(dsec, base_dir=self.base_dir, seed=self.seed,
@@ -114,7 +114,6 @@ class Scenario:
         return dem, known
 
     def texture(self):
-        from . import terrain
         sec = self.section("scene").section("texture")
         # synthesise only the bands the instrument has (texture synthesis is a large share of rendering)
         bands = {d.band for d in self.instrument.detectors}
@@ -122,7 +121,6 @@ class Scenario:
                                            default_bands=bands)
 
     def sun(self):
-        from . import terrain
         return terrain.sun_from_config(self.section("scene").section("sun"))
 
     def to_dict(self) -> dict:

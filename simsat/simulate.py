@@ -1,9 +1,9 @@
 """Scenario → rendered multi-band product + exact truth (the `simsat render` command)."""
 from __future__ import annotations
 
+import math
 import platform as _pyplatform
 import shutil
-import math
 import sys
 import time as _time
 from dataclasses import dataclass, field
@@ -11,7 +11,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .product import atomic_write_dataset, atomic_write_json, make_tmp_dir, netcdf_encoding, product_dataset
+from . import __version__, terrain
+from .product import (
+    atomic_write_dataset,
+    atomic_write_json,
+    make_tmp_dir,
+    netcdf_encoding,
+    product_dataset,
+)
 from .rundir import RunLock, content_id, install_files, prepare_output_dir
 from .scenario import Scenario, load_scenario
 
@@ -54,8 +61,6 @@ def apply_radiometry(radiance: np.ndarray, radiometry, *, seed: int, band_index:
 
 def build_world(sc: Scenario):
     """Models of a scenario: attitude model, true/known DEMs, texture, irradiance grid."""
-    from . import terrain
-
     model = sc.attitude_model()
     dem, known = sc.dems()
     texture = sc.texture()
@@ -68,7 +73,7 @@ def build_world(sc: Scenario):
 
 def make_renderer(sc, model, dem, texture, irr):
     """The push-broom renderer of a scenario's world (:func:`build_world`)."""
-    from .render.pushbroom import PushbroomRenderer
+    from .render.pushbroom import PushbroomRenderer  # Mitsuba / Dr.Jit: heavy, loaded only to render
 
     sun = sc.sun()
     # cloud tops are lit like flat ground in the open (no relief shading, no cast shadow)
@@ -85,7 +90,6 @@ def _versions() -> dict:
             out[mod] = getattr(m, "__version__", "?")
         except Exception:  # pragma: no cover
             out[mod] = None
-    from . import __version__
     out["simsat"] = __version__
     return out
 
@@ -97,8 +101,6 @@ def product_id(sc: Scenario) -> str:
     its file location and without the tables read only after rendering
     (``[restoration]``, ``[report]``), the seed, and simsat's version.
     """
-    from . import __version__
-
     d = sc.to_dict()
     d.pop("source", None)
     d["raw"] = {k: v for k, v in d["raw"].items() if k not in ("restoration", "report")}
@@ -198,7 +200,7 @@ def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> Simulati
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     del renderer, model, dem, known_dem, texture, irr
-    from .render import release_memory
+    from .render import release_memory  # Mitsuba / Dr.Jit: loaded only to render
     release_memory()
     return SimulationResult(out_dir=out_dir, timings=timings, render_stats=render_stats, replaced=replaced)
 

@@ -113,7 +113,7 @@ def _say_replaced(out: Path, replaced: list) -> None:
 
 def _report(run_dir: Path, out_dir, *, quiet: bool) -> Path:
     """Write the report of a run while holding its lock; refuse a run of mixed files."""
-    from reports.run_report import make_run_report
+    from reports.run_report import make_run_report  # matplotlib, PyVista: heavy
 
 
     run_dir = Path(run_dir)
@@ -143,7 +143,7 @@ def _write_report_manifest(report_dir: Path, *, since_ns: int, run_dir: Path) ->
 
 
 def _summary(run_dir: Path, report_path=None) -> str:
-    from reports.summary import run_summary
+    from reports.summary import run_summary  # matplotlib (via reports): heavy
 
     return run_summary(run_dir, report_path=report_path)
 
@@ -188,7 +188,7 @@ def cmd_run(args) -> int:
 
 
 def cmd_figures(args) -> int:
-    from reports.figures import make_patent_figures
+    from reports.figures import make_patent_figures  # matplotlib: heavy
 
     paths = make_patent_figures(Path(args.out), monte_carlo=not args.no_monte_carlo, seed=args.seed,
                                 progress=not args.quiet)
@@ -198,7 +198,7 @@ def cmd_figures(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from reports import bench
+    from reports import bench  # matplotlib, Mitsuba: heavy
 
     result = bench.run_bench(args.what, scenario=args.scenario, out=args.out, lines=args.lines, seed=args.seed)
     print(bench.format_result(args.what, result))

@@ -43,9 +43,21 @@ import numpy as np
 
 from . import gaps, spectrum, transfer
 from .gaps import coverage, fill_from_differentials, interpolate_gaps, observed_mask
-from .transfer import (blind_frequencies, chain_gain, fused_chain_gain, fused_gains,
-                       pair_transfer, wiener_gain)
-from .methods import DEFAULT_METHOD, INTEGRATION_METHODS, PIPELINE_OPTIONS, IntegrationMethod, integration_method
+from .methods import (
+    DEFAULT_METHOD,
+    INTEGRATION_METHODS,
+    PIPELINE_OPTIONS,
+    IntegrationMethod,
+    integration_method,
+)
+from .transfer import (
+    blind_frequencies,
+    chain_gain,
+    fused_chain_gain,
+    fused_gains,
+    pair_transfer,
+    wiener_gain,
+)
 from .wiener import integrate_inverse, integrate_wiener, integrate_wiener_fft
 
 __all__ = ["integrate", "METHODS", "INTEGRATION_METHODS", "IntegrationMethod", "integration_method", "DEFAULT_METHOD", "method_function", "method_options", "check_options",
