@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from reports.bench_matching import METHODS, bench_matching, format_table, synthetic_pairs
+from reports.bench_matching import METHODS, bench_matching, format_table
+from reports.synthetic import synthetic_pairs
 
 
 def test_synthetic_pairs():

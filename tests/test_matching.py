@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from reports.bench_matching import synthetic_pairs
+from reports.synthetic import synthetic_pairs
 from restore.matching import (MatchFlag, lanczos_weights, match_points, resample_windows,
                               support_margin)
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from reports.bench_matching import _evaluate, _texture_terms
+from reports.synthetic import textured_image
 from restore.matching import support_margin
 from restore.selection import (double_gradient_points, estimate_image_noise, expected_matching_std,
                                gradient_energy, grid_points, select_points, spread_quality_subset,
@@ -18,9 +18,7 @@ CLOUD = (slice(40, 110), slice(450, 560))   # bright, saturated
 def scene():
     """Textured ground (std 10 around 100) with a water band and a saturated cloud."""
     rng = np.random.default_rng(0)
-    f, ph, amp = _texture_terms(rng, 1, 300, 0.3, 0.02)
-    amp = amp / np.sqrt(0.5 * np.sum(amp**2))
-    img = 100.0 + 10.0 * _evaluate(f, ph, amp, np.arange(L, dtype=float)[None], np.arange(C, dtype=float)[None])[0]
+    img = 100.0 + 10.0 * textured_image((L, C), rng=rng)
     img[WATER] = 20.0
     img[CLOUD] = 4095.0
     img += NOISE * rng.standard_normal(img.shape)
