@@ -8,7 +8,7 @@ from pathlib import Path
 from reports.keyref import MEANING, _norm, recorded_keys, scenario_key_reference
 from simsat.scenario import _read_toml, builtin_scenarios
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _leaf_keys(node, path=""):

@@ -40,7 +40,7 @@ def _copy(src: Path, dst: Path) -> Path:
 
 # --------------------------------------------------------------------------- scenario paths
 def test_builtin_scenarios_are_real_files_of_the_top_level_folder():
-    repo_scenarios = Path(__file__).resolve().parents[1] / "scenarios"
+    repo_scenarios = Path(__file__).resolve().parents[2] / "scenarios"
     assert (repo_scenarios / "phr_cmg.toml").is_file() and not (repo_scenarios / "phr_cmg.toml").is_symlink()
     assert SCENARIO_DIR == repo_scenarios.resolve()
     assert {"phr_cmg", "tiny", "phr_full"} <= set(builtin_scenarios())

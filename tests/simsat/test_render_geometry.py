@@ -10,7 +10,7 @@ import pytest
 from simsat.render.pushbroom import PushbroomRenderer
 from simsat.sensor_model import SensorModel, constant_attitude
 
-from helpers import SpotTexture, WaveTexture, centred_platform, flat_dem, small_instrument
+from support.geometry import SpotTexture, WaveTexture, centred_platform, flat_dem, small_instrument
 
 N_LINES = 160
 

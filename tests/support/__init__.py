@@ -1,0 +1,1 @@
+"""Synthetic fixtures shared by the tests (analytic scenes, geometry helpers)."""
