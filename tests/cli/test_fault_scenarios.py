@@ -28,10 +28,7 @@ import simsat_cli as cli
 from simsat.config import ScenarioError
 from simsat.scenario import builtin_scenarios, load_scenario, _read_toml
 
-try:
-    from restore.pipeline import restoration_settings
-except ImportError:  # pragma: no cover
-    restoration_settings = None
+import restore  # noqa: F401  (registers [restoration] in load_scenario's validation pass)
 
 #: mutations that are invalid whatever the key (value as TOML text for --set)
 ALWAYS_INVALID = {"nan": "nan", "inf": "inf", "-inf": "-inf", "1e300": "1e300", "-1e300": "-1e300"}
@@ -119,9 +116,7 @@ def _verdict(capsys, name, key, label, text):
             parent[last + "x"] = value
         rc, err = 0, ""
         try:
-            sc = load_scenario(raw)
-            if restoration_settings is not None:
-                restoration_settings(sc.section("restoration"))
+            load_scenario(raw)  # the single validation pass: every table of every stage
         except (ScenarioError, ValueError) as e:
             rc, err = 2, f"simsat: error: {e}\n"
     elapsed = time.perf_counter() - t0
@@ -183,3 +178,24 @@ def test_mutation_set_is_large_and_covers_every_table():
     for table in ("platform", "instrument.noise", "attitude.jitter[0]", "scene.dem", "scene.texture",
                   "acquisition", "restoration", "report"):
         assert any(k.startswith(table) for k in keys), table
+
+
+@pytest.mark.parametrize("override,key,hint", [
+    ("restoration.integration.noise_sd=1e-6", "restoration.integration.noise_sd", "noise_std"),
+    ("restoration.method=\"wienr\"", "restoration.method", "wiener"),
+    ("restoration.windw_lines=3", "restoration.windw_lines", "window_lines"),
+    ("report.foo=1", "report.foo", ""),
+])
+def test_bad_keys_of_later_stages_fail_at_validate(capsys, override, key, hint):
+    """The issue's examples: options of the integration method, [report] keys, misspellings of [restoration]."""
+    rc = cli.main(["validate", "tiny", "--set", override])
+    err = capsys.readouterr().err
+    assert rc == 2 and "internal error" not in err and err.count("\n") == 1
+    assert key in err and hint in err, err
+
+
+def test_load_scenario_alone_validates_restoration_once_restore_is_imported():
+    raw = _read_toml(builtin_scenarios()["tiny"])
+    raw.setdefault("restoration", {})["window_lines"] = 4
+    with pytest.raises(ScenarioError, match="restoration.window_lines"):
+        load_scenario(raw)
