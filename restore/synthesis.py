@@ -101,6 +101,56 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
     -------
     SynthesisResult
     """
+    lines, rl, rc, s, w, ok, idx = _checked_inputs(lines, residual_lines, residual_columns, sensitivities,
+                                                   weights, axes, min_points, n_lines)
+    n, k = lines.size, len(idx)
+    # scale unknowns to µrad-ish magnitude for conditioning
+    scale = 1e-6
+    rows_l = s[:, 0, idx] * scale
+    rows_c = s[:, 1, idx] * scale
+    inl = ok.copy()
+    x = np.full((n_lines, k), np.nan)
+    npts = np.zeros(n_lines, dtype=np.int64)
+    sig_l = sig_c = 1.0
+    rms = np.nan
+    for it in range(max_iter + 1):
+        li = np.where(inl, lines, 0)
+        nm, rhs = _accumulate(li, rows_l, rows_c, np.where(inl, rl, 0.0), np.where(inl, rc, 0.0),
+                              np.where(inl[:, None], w, 0.0), n_lines, k)
+        npts = np.bincount(li[inl], minlength=n_lines)
+        x = _solve_lines(nm, rhs, npts >= min_points, n_lines, k)
+        # residuals of every point against its line's fit
+        xp = x[lines]
+        has = np.all(np.isfinite(xp), axis=1)
+        el = rl - np.einsum("nk,nk->n", rows_l, np.nan_to_num(xp))
+        ec = rc - np.einsum("nk,nk->n", rows_c, np.nan_to_num(xp))
+        use = inl & has
+        if use.sum() < 3:
+            break
+        # standardised residuals (weights are relative inverse variances)
+        zl = el * np.sqrt(w[:, 0])
+        zc = ec * np.sqrt(w[:, 1])
+        sig_l = _robust_sigma(zl[use], sigma_floor_px)
+        sig_c = _robust_sigma(zc[use], sigma_floor_px)
+        rms = float(np.sqrt(np.mean(np.concatenate([el[use], ec[use]]) ** 2)))
+        if it == max_iter:
+            break
+        new = ok & has & (np.abs(zl) <= n_sigma * sig_l) & (np.abs(zc) <= n_sigma * sig_c)
+        new |= ok & ~has & inl  # keep points of lines not (yet) estimable
+        if np.array_equal(new, inl):
+            break
+        inl = new
+    cov_diag = _formal_sigma(x, inl, lines, rows_l, rows_c, w, sig_l, sig_c, n_lines)
+    diff = np.full((n_lines, 3), np.nan)
+    sigma = np.full((n_lines, 3), np.nan)
+    diff[:, idx] = x * scale
+    sigma[:, idx] = cov_diag * scale
+    return SynthesisResult(diff=diff, sigma=sigma, n_points=npts, inlier=inl, residual_rms_px=rms,
+                           fitted_axes=tuple(axes))
+
+
+def _checked_inputs(lines, residual_lines, residual_columns, sensitivities, weights, axes, min_points, n_lines):
+    """The inputs as arrays, the (n, 2) weights normalised to a median of 1, the usable points, the axes' indices."""
     lines = np.asarray(lines, dtype=np.int64)
     rl = np.asarray(residual_lines, dtype=np.float64)
     rc = np.asarray(residual_columns, dtype=np.float64)
@@ -114,7 +164,6 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
     if unknown:
         raise ValueError(f"axes: unknown axis {unknown[0]!r}; allowed: roll, pitch, yaw")
     idx = [AXES.index(a) for a in axes]
-    k = len(idx)
     w = np.ones((n, 2)) if weights is None else np.asarray(weights, dtype=np.float64).copy()
     if w.ndim == 1:
         w = np.repeat(w[:, None], 2, axis=1)
@@ -124,61 +173,32 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
     ok = np.isfinite(rl) & np.isfinite(rc) & np.all(np.isfinite(w) & (w > 0), axis=1) & \
         np.all(np.isfinite(s), axis=(1, 2))
     ok &= (lines >= 0) & (lines < n_lines)
-    rows_l = s[:, 0, idx]
-    rows_c = s[:, 1, idx]
-    # scale unknowns to µrad-ish magnitude for conditioning
-    scale = 1e-6
-    rows_l = rows_l * scale
-    rows_c = rows_c * scale
-    inl = ok.copy()
+    return lines, rl, rc, s, w, ok, idx
+
+
+def _solve_lines(nm, rhs, good, n_lines: int, k: int) -> np.ndarray:
+    """Per-line least-squares solutions (n_lines, k); NaN on lines with too few points or a singular system."""
+    det_ok = np.zeros(n_lines, dtype=bool)
+    if good.any():
+        with np.errstate(all="ignore"):
+            cond = np.linalg.cond(nm[good])
+        det_ok[np.flatnonzero(good)] = np.isfinite(cond) & (cond < 1e10)
+    good = good & det_ok
     x = np.full((n_lines, k), np.nan)
+    if good.any():
+        x[good] = np.linalg.solve(nm[good], rhs[good][..., None])[..., 0]
+    return x
+
+
+def _robust_sigma(z: np.ndarray, floor: float) -> float:
+    """1.4826 × median absolute deviation of ``z`` (a robust σ), at least ``floor``."""
+    return max(1.4826 * np.median(np.abs(z - np.median(z))), floor)
+
+
+def _formal_sigma(x, inl, lines, rows_l, rows_c, w, sig_l, sig_c, n_lines: int) -> np.ndarray:
+    """Formal 1-σ of each line's unknowns: diag((Nm)⁻¹) scaled by the residual variance (weights are relative)."""
+    n, k = lines.size, x.shape[1]
     cov_diag = np.full((n_lines, k), np.nan)
-    npts = np.zeros(n_lines, dtype=np.int64)
-    sig_l = sig_c = 1.0
-    rms = np.nan
-    for it in range(max_iter + 1):
-        li = np.where(inl, lines, 0)
-        wi = np.where(inl[:, None], w, 0.0)
-        rli = np.where(inl, rl, 0.0)
-        rci = np.where(inl, rc, 0.0)
-        nm, rhs = _accumulate(li, rows_l, rows_c, rli, rci, wi, n_lines, k)
-        npts = np.bincount(li[inl], minlength=n_lines)
-        good = npts >= min_points
-        # guard against singular systems
-        det_ok = np.zeros(n_lines, dtype=bool)
-        if good.any():
-            with np.errstate(all="ignore"):
-                cond = np.linalg.cond(nm[good])
-            det_ok[np.flatnonzero(good)] = np.isfinite(cond) & (cond < 1e10)
-        good &= det_ok
-        x[:] = np.nan
-        if good.any():
-            sol = np.linalg.solve(nm[good], rhs[good][..., None])[..., 0]
-            x[good] = sol
-        # residuals of every point against its line's fit
-        xp = x[lines]
-        fit_l = np.einsum("nk,nk->n", rows_l, np.nan_to_num(xp))
-        fit_c = np.einsum("nk,nk->n", rows_c, np.nan_to_num(xp))
-        has = np.all(np.isfinite(xp), axis=1)
-        el = rl - fit_l
-        ec = rc - fit_c
-        use = inl & has
-        if use.sum() < 3:
-            break
-        # standardised residuals (weights are relative inverse variances)
-        zl = el * np.sqrt(w[:, 0])
-        zc = ec * np.sqrt(w[:, 1])
-        sig_l = max(1.4826 * np.median(np.abs(zl[use] - np.median(zl[use]))), sigma_floor_px)
-        sig_c = max(1.4826 * np.median(np.abs(zc[use] - np.median(zc[use]))), sigma_floor_px)
-        rms = float(np.sqrt(np.mean(np.concatenate([el[use], ec[use]]) ** 2)))
-        if it == max_iter:
-            break
-        new = ok & has & (np.abs(zl) <= n_sigma * sig_l) & (np.abs(zc) <= n_sigma * sig_c)
-        new |= ok & ~has & inl  # keep points of lines not (yet) estimable
-        if np.array_equal(new, inl):
-            break
-        inl = new
-    # formal covariance: (Nm)^-1 scaled by the residual variance (weights are relative)
     good = np.all(np.isfinite(x), axis=1)
     if good.any():
         nm, _ = _accumulate(np.where(inl, lines, 0), rows_l, rows_c, np.zeros(n), np.zeros(n),
@@ -186,12 +206,7 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
         s2 = 0.5 * (sig_l ** 2 + sig_c ** 2)
         inv = np.linalg.inv(nm[good])
         cov_diag[good] = np.sqrt(np.maximum(np.einsum("nii->ni", inv), 0) * s2)
-    diff = np.full((n_lines, 3), np.nan)
-    sigma = np.full((n_lines, 3), np.nan)
-    diff[:, idx] = x * scale
-    sigma[:, idx] = cov_diag * scale
-    return SynthesisResult(diff=diff, sigma=sigma, n_points=npts, inlier=inl, residual_rms_px=rms,
-                           fitted_axes=tuple(axes))
+    return cov_diag
 
 
 def highpass_nan(signal: np.ndarray, *, dt: float, cutoff_hz: float) -> np.ndarray:

@@ -19,6 +19,9 @@ frequencies every pair is blind to. The system is banded (bandwidth
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.signal import welch
 
 __all__ = ["integrate_lsq", "keys_weights"]
 
@@ -78,9 +81,51 @@ def integrate_lsq(diffs, taus, dt, *, lags=None, sigmas=None, alpha: float | Non
         θ at ``n dt`` [rad], mean removed; NaN where no equation reaches
         (beyond the last measured sample or in gaps longer than the pairs' lags).
     """
-    import scipy.sparse as sp
-    import scipy.sparse.linalg as spla
+    diffs, taus, n = _checked(diffs, taus, dt)
+    if lags is None:
+        lags = [np.zeros(n)] * len(diffs)
+    A, b, w, noise_levels = _equations(diffs, taus, dt, lags, sigmas)
+    if A is None:
+        return np.full(n, np.nan)
+    wn = w / np.median(w)  # relative weights: median equation has weight 1
+    sigma_d = float(np.median(noise_levels)) if noise_std is None else float(noise_std)
+    dv = np.concatenate([d[np.isfinite(d)] for d in diffs])
+    if bandwidth_hz is None and beta is None:
+        bandwidth_hz = _bandwidth_hz(diffs, dt)
+    D2 = sp.diags([np.ones(n - 2), -2 * np.ones(n - 2), np.ones(n - 2)], [0, 1, 2], shape=(n - 2, n))
+    AtWA = (A.T @ sp.diags(wn) @ A).tocsc()
+    DtD = (D2.T @ D2).tocsc()
+    eye = sp.identity(n, format="csc")
+    y = A.T @ (wn * b)
+    # empirical Bayes: the formal noise level of the differentials is re-scaled by the
+    # post-fit residuals (matching errors are larger than their formal σ), then the
+    # prior weights are recomputed and the system solved again
+    passes = 1 if (noise_std is not None or (alpha is not None and beta is not None)) else 3
+    for _ in range(passes):
+        a, bt = _prior_weights(dv, sigma_d, dt, alpha=alpha, beta=beta, signal_std=signal_std,
+                               bandwidth_hz=bandwidth_hz)
+        theta = spla.spsolve((AtWA + a * eye + bt * DtD).tocsc(), y)
+        r = A @ theta - b
+        m_eq = r.size
+        dof = max(m_eq - n, m_eq // 4)  # the fit absorbs about one equation per unknown
+        new = float(np.sqrt(np.sum(wn * r ** 2) / dof))
+        if not np.isfinite(new) or new <= 0:
+            break
+        sigma_d = new
+    if gcv:
+        theta = _gcv_solution(A, b, wn, AtWA + a * eye, bt, DtD, y)
+    # where no equation constrains θ (beyond the reach of every pair) there is no estimate
+    reach = np.asarray(abs(A).sum(axis=0)).ravel() > 0
+    covered = _dilate_coverage(reach, n)
+    theta = np.where(covered, theta, np.nan)
+    m = np.isfinite(theta)
+    if m.any():
+        theta = theta - theta[m].mean()
+    return theta
 
+
+def _checked(diffs, taus, dt) -> tuple:
+    """The differentials as float arrays of one length, the lags as floats, and that length."""
     diffs = [np.asarray(d, dtype=np.float64) for d in diffs]
     if not diffs:
         raise ValueError("diffs: at least one differential series is required")
@@ -94,8 +139,28 @@ def integrate_lsq(diffs, taus, dt, *, lags=None, sigmas=None, alpha: float | Non
         raise ValueError("taus: must all be > 0")
     if not dt > 0:
         raise ValueError(f"dt: must be > 0, got {dt}")
-    if lags is None:
-        lags = [np.zeros(n)] * len(diffs)
+    return diffs, taus, n
+
+
+def _pair_weights(d, idx, sigma_j) -> tuple:
+    """Weights 1/σ² of a pair's equations and its noise level: given σ, or robust from third differences."""
+    if sigma_j is not None:
+        s = np.asarray(sigma_j, dtype=np.float64)[idx]
+        good = np.isfinite(s) & (s > 0)
+        s = np.where(good, s, np.nanmedian(s[good]) if good.any() else 1.0)
+        return 1.0 / s ** 2, np.nanmedian(s)
+    # robust noise of the pair: third differences are noise-dominated for band-limited jitter
+    s = _robust_std(np.diff(d, 3)) / np.sqrt(20.0)
+    s = s if np.isfinite(s) and s > 0 else 1e-12
+    return np.full(idx.size, 1.0 / s ** 2), s
+
+
+def _equations(diffs, taus, dt, lags, sigmas) -> tuple:
+    """The sparse system ``A θ = b`` (one row per measured sample, Keys taps at the lagged time), weights, noise.
+
+    Returns ``(None, None, None, None)`` when no sample gives an equation.
+    """
+    n = diffs[0].size
     rows, cols, vals, rhs, wts = [], [], [], [], []
     r0 = 0
     noise_levels = []
@@ -119,82 +184,45 @@ def integrate_lsq(diffs, taus, dt, *, lags=None, sigmas=None, alpha: float | Non
         cols.append(idx)
         vals.append(-np.ones(m))
         rhs.append(d[idx])
-        if sigmas is not None:
-            s = np.asarray(sigmas[j], dtype=np.float64)[idx]
-            good = np.isfinite(s) & (s > 0)
-            s = np.where(good, s, np.nanmedian(s[good]) if good.any() else 1.0)
-            wts.append(1.0 / s ** 2)
-            noise_levels.append(np.nanmedian(s))
-        else:
-            # robust noise of the pair: third differences are noise-dominated for band-limited jitter
-            d3 = np.diff(d, 3)
-            s = _robust_std(d3) / np.sqrt(20.0)
-            s = s if np.isfinite(s) and s > 0 else 1e-12
-            wts.append(np.full(m, 1.0 / s ** 2))
-            noise_levels.append(s)
+        wj, sj = _pair_weights(d, idx, None if sigmas is None else sigmas[j])
+        wts.append(wj)
+        noise_levels.append(sj)
         r0 += m
     if r0 == 0:
-        return np.full(n, np.nan)
+        return None, None, None, None
     A = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(r0, n))
-    b = np.concatenate(rhs)
-    w = np.concatenate(wts)
-    wn = w / np.median(w)  # relative weights: median equation has weight 1
-    sigma_d = float(np.median(noise_levels)) if noise_std is None else float(noise_std)
-    dv = np.concatenate([d[np.isfinite(d)] for d in diffs])
-    if bandwidth_hz is None and beta is None:
-        bandwidth_hz = _bandwidth_hz(diffs, dt)
-    D2 = sp.diags([np.ones(n - 2), -2 * np.ones(n - 2), np.ones(n - 2)], [0, 1, 2], shape=(n - 2, n))
-    AtWA = (A.T @ sp.diags(wn) @ A).tocsc()
-    DtD = (D2.T @ D2).tocsc()
-    eye = sp.identity(n, format="csc")
-    y = A.T @ (wn * b)
-    # empirical Bayes: the formal noise level of the differentials is re-scaled by the
-    # post-fit residuals (matching errors are larger than their formal σ), then the
-    # prior weights are recomputed and the system solved again
-    passes = 1 if (noise_std is not None or (alpha is not None and beta is not None)) else 3
-    for _ in range(passes):
-        sig_t = float(signal_std) if signal_std is not None else \
-            max(np.sqrt(max(np.var(dv) - sigma_d ** 2, 0.0) / 2.0), sigma_d)
-        a = alpha if alpha is not None else (sigma_d / sig_t) ** 2
-        if beta is None:
-            # curvature of a band-limited signal: |Δ²θ| ≈ (2π f dt)² |θ|
-            curv = (2 * np.pi * bandwidth_hz * dt) ** 2 * sig_t
-            bt = (sigma_d / max(curv, 1e-30)) ** 2
-        else:
-            bt = beta
-        theta = spla.spsolve((AtWA + a * eye + bt * DtD).tocsc(), y)
-        r = A @ theta - b
-        m_eq = r.size
-        dof = max(m_eq - n, m_eq // 4)  # the fit absorbs about one equation per unknown
-        new = float(np.sqrt(np.sum(wn * r ** 2) / dof))
-        if not np.isfinite(new) or new <= 0:
-            break
-        sigma_d = new
-    if gcv:
-        # generalised cross-validation over a multiplier of the curvature weight
-        rng = np.random.default_rng(0)
-        probes = rng.choice([-1.0, 1.0], size=(3, r0))
-        best = None
-        sw = np.sqrt(wn)
-        for kappa in (0.3, 1.0, 3.0, 10.0, 30.0):
-            M = (AtWA + a * eye + kappa * bt * DtD).tocsc()
-            lu = spla.splu(M)
-            th = lu.solve(y)
-            res = sw * (A @ th - b)
-            # tr(H) with H = W^1/2 A M^-1 A^T W^1/2, Hutchinson estimator
-            tr = np.mean([z @ (sw * (A @ lu.solve(A.T @ (sw * z)))) for z in probes])
-            g = r0 * float(res @ res) / max(r0 - tr, 1.0) ** 2
-            if best is None or g < best[0]:
-                best = (g, th, kappa)
-        theta = best[1]
-    # where no equation constrains θ (beyond the reach of every pair) there is no estimate
-    reach = np.asarray(abs(A).sum(axis=0)).ravel() > 0
-    covered = _dilate_coverage(reach, n)
-    theta = np.where(covered, theta, np.nan)
-    m = np.isfinite(theta)
-    if m.any():
-        theta = theta - theta[m].mean()
-    return theta
+    return A, np.concatenate(rhs), np.concatenate(wts), noise_levels
+
+
+def _prior_weights(dv, sigma_d: float, dt: float, *, alpha, beta, signal_std, bandwidth_hz) -> tuple:
+    """Ridge α = (σ_D/σ_θ)² and curvature β = (σ_D / ((2π f dt)² σ_θ))² unless given."""
+    sig_t = float(signal_std) if signal_std is not None else \
+        max(np.sqrt(max(np.var(dv) - sigma_d ** 2, 0.0) / 2.0), sigma_d)
+    a = alpha if alpha is not None else (sigma_d / sig_t) ** 2
+    if beta is None:
+        # curvature of a band-limited signal: |Δ²θ| ≈ (2π f dt)² |θ|
+        curv = (2 * np.pi * bandwidth_hz * dt) ** 2 * sig_t
+        return a, (sigma_d / max(curv, 1e-30)) ** 2
+    return a, beta
+
+
+def _gcv_solution(A, b, wn, base, bt: float, DtD, y) -> np.ndarray:
+    """Generalised cross-validation over a multiplier (0.3–30) of the curvature weight; tr(H) by Hutchinson."""
+    r0 = A.shape[0]
+    rng = np.random.default_rng(0)
+    probes = rng.choice([-1.0, 1.0], size=(3, r0))
+    best = None
+    sw = np.sqrt(wn)
+    for kappa in (0.3, 1.0, 3.0, 10.0, 30.0):
+        lu = spla.splu((base + kappa * bt * DtD).tocsc())
+        th = lu.solve(y)
+        res = sw * (A @ th - b)
+        # tr(H) with H = W^1/2 A M^-1 A^T W^1/2
+        tr = np.mean([z @ (sw * (A @ lu.solve(A.T @ (sw * z)))) for z in probes])
+        g = r0 * float(res @ res) / max(r0 - tr, 1.0) ** 2
+        if best is None or g < best[0]:
+            best = (g, th, kappa)
+    return best[1]
 
 
 def _dilate_coverage(reach: np.ndarray, n: int) -> np.ndarray:
@@ -209,8 +237,6 @@ def _dilate_coverage(reach: np.ndarray, n: int) -> np.ndarray:
 def _bandwidth_hz(diffs, dt) -> float:
     """A typical highest frequency of the signal: the frequency below which 95 % of the
     differentials' power lies (noise floor removed)."""
-    from scipy.signal import welch
-
     ps = []
     for d in diffs:
         x = np.asarray(d, dtype=np.float64)
