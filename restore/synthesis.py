@@ -103,7 +103,7 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
     """
     lines, rl, rc, s, w, ok, idx = _checked_inputs(lines, residual_lines, residual_columns, sensitivities,
                                                    weights, axes, min_points, n_lines)
-    n, k = lines.size, len(idx)
+    k = len(idx)
     # scale unknowns to µrad-ish magnitude for conditioning
     scale = 1e-6
     rows_l = s[:, 0, idx] * scale
