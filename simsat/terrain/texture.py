@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from enum import IntEnum
 from typing import Mapping, Sequence
 
@@ -176,6 +177,35 @@ def _smooth(t):
 
 def _clip01(a):
     return np.clip(a, _F32(0.0), _F32(1.0), out=a)
+
+
+@dataclass
+class _Fields:
+    """Noise fields (~[-1, 1]) and frames of one evaluation: the layout's (u, v) and the fields' (uf, vf)."""
+
+    n2: np.ndarray
+    n5: np.ndarray
+    n12: np.ndarray
+    n40: np.ndarray
+    nw: np.ndarray
+    nf: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    uf: np.ndarray
+    vf: np.ndarray
+    domb: np.ndarray
+    n: int
+
+
+@dataclass
+class _Canvas:
+    """What the layers paint per texel: two materials, their mixing, a gain, the land-cover class."""
+
+    m1: np.ndarray
+    m2: np.ndarray
+    alpha: np.ndarray
+    gain: np.ndarray
+    cls: np.ndarray
 
 
 class ProceduralTexture:
@@ -568,31 +598,66 @@ class ProceduralTexture:
         return np.where(present, hw, _F32(0.0))
 
     def _evaluate(self, c: Coords, *, want_bands: bool, shading=None, cloud_irradiance: float = 1.0):
-        shape = c.shape
-        n = int(np.prod(shape))
-        x, y = c.x, c.y
+        """Land-cover classes and (``want_bands``) reflectance per band at the points of ``c``.
+
+        Layers painted in order over the default agricultural parcels: forest
+        and natural shores, roads, built-up blocks, water, then clouds and
+        their shadows over everything.
+        """
+        f = self._fields(c)
+        cv, track, p_stand = self._parcels(f)
+        water, shore, urban, forest, blocks = self._land_masks(c, f)
+        if forest.any():
+            self._paint_forest(c, f, cv, forest, p_stand)
+        if shore.any():                              # natural banks around water
+            _put(cv.m1, shore, _M["pasture"])
+            _put(cv.m2, shore, _M["shrub"])
+            _put(cv.alpha, shore, _clip01(_F32(0.5) + _F32(0.8) * f.n5 + _F32(0.3) * f.n12))
+            _put(cv.cls, shore, LandCover.GRASSLAND)
+        self._paint_roads(c, f, cv, track, water, urban)
+        shadow = None
+        if urban.any():
+            shadow = np.zeros(c.shape, dtype=_F32)
+            bu, bv, bcode, blk = blocks
+            self._urban(urban, f.u, f.v, bu, bv, bcode, blk, f.n2, f.n5, f.n12, cv.m1, cv.m2, cv.alpha, cv.gain,
+                        shadow, cv.cls, want_shadows=want_bands)
+        if water.any():                              # dark, nearly uniform; a little brighter near the shore
+            _put(cv.m1, water, _M["shallow_water"])
+            _put(cv.m2, water, _M["deep_water"])
+            _put(cv.alpha, water, np.clip((f.nw - self._t_water) * _F32(12.0) + _F32(0.6), _F32(0), _F32(0.6)))
+            _put(cv.gain, water, _F32(1.0) + _F32(0.01) * f.n40)
+            _put(cv.cls, water, LandCover.WATER)
+        clouds = self._clouds(c, cv) if self.cloud_fraction > 0 else None
+        if not want_bands:
+            return cv.cls, None
+        return cv.cls, self._reflectance(cv, c.shape, shadow, shading, clouds, cloud_irradiance)
+
+    def _fields(self, c: Coords) -> "_Fields":
+        """Noise fields shared by the classes (values in ~[-1, 1]) and the rotated frames of the layout."""
         S = self._salt
-        i32 = np.intp  # index arrays: intp gathers are several times faster than int32
-        # ---- noise fields shared by the classes (values in ~[-1, 1]) -----------
-        n2 = value_noise(c, 2.0, S[10])
-        n5 = value_noise(c, 5.0, S[11])
-        n12 = value_noise(c, 12.0, S[12])
-        n40 = value_noise(c, 40.0, S[13])
-        nw = self._macro_field(c, "water")
-        nf = self._macro_field(c, "forest")
+        x, y = c.x, c.y
         nd = self._macro_field(c, "domain")
-        # ---- frames ----------------------------------------------------------
         u = self._cu * x + self._su * y
         v = self._cu * y - self._su * x
         domb = nd > _F32(0.0)
-        uf = np.where(domb, self._cb * x + self._sb * y, u)
-        vf = np.where(domb, self._cb * y - self._sb * x, v)
+        return _Fields(n2=value_noise(c, 2.0, S[10]), n5=value_noise(c, 5.0, S[11]), n12=value_noise(c, 12.0, S[12]),
+                       n40=value_noise(c, 40.0, S[13]), nw=self._macro_field(c, "water"),
+                       nf=self._macro_field(c, "forest"), u=u, v=v, domb=domb,
+                       uf=np.where(domb, self._cb * x + self._sb * y, u), vf=np.where(domb, self._cb * y - self._sb * x, v),
+                       n=int(np.prod(c.shape)))
 
-        # ---- agricultural parcels (default land) ------------------------------
-        # strips along the field frame's u axis, jittered boundaries b(k) in v
+    def _parcels(self, f: "_Fields") -> tuple:
+        """Agricultural parcels (the default land): the canvas, the gravel tracks, the forest stand of each texel.
+
+        Strips along the field frame's u axis with jittered boundaries b(k) in
+        v; parcels along each strip with jittered boundaries c(m) in u; a crop
+        per sub-strip with its row pattern; margins (hedges, grass strips).
+        """
+        i32 = np.intp  # index arrays: intp gathers are several times faster than int32
+        uf, vf, n = f.uf, f.vf, f.n
         kn = np.floor(vf * _F32(1.0 / self._Sv) + _F32(0.5)).astype(i32)
         kn *= 2
-        kn += domb                                  # key = 2 k + domain
+        kn += f.domb                                # key = 2 k + domain
         strips = Lookup.around([self._strip_b, self._track_flag, self._strip_su, self._strip_off],
                                kn, 0, n, margin_i=4)
         ik = strips.index(kn, 0)
@@ -605,7 +670,6 @@ class ProceduralTexture:
         hi = strips.take(0, ik_hi)
         su = strips.take(2, ik)
         up = uf + strips.take(3, ik) * su
-        # parcels along each strip, jittered boundaries c(m) in u
         mn = np.floor(up / su + _F32(0.5)).astype(i32)
         cols = Lookup.around([self._col_b, self._parcel_attrs], mn, ks, n, margin_i=2)
         ic = cols.index(mn, ks)
@@ -624,75 +688,81 @@ class ProceduralTexture:
         ctype = _CROP_BY_BYTE[sub]                  # crop of the parcel's sub-strip
         w = np.where(p_along_u, up, vf)
         w *= p_iper
+        cv = self._crops(f, ctype, w, p_gain)
+        margin = np.minimum(du, dv) < p_wmarg
+        if margin.any():
+            _put(cv.m1, margin, _M["dry_grass"])
+            _put(cv.m2, margin, _M["pasture"])
+            _put(cv.m1, margin & p_hedge, _M["hedge"])
+            _put(cv.alpha, margin, 0.5)
+        track = ((strips.take(1, ik) != 0) & (vf - lo < _F32(1.7))) | \
+                ((strips.take(1, ik_hi) != 0) & (hi - vf < _F32(1.7)))
+        return cv, track, p_stand
+
+    @staticmethod
+    def _crops(f: "_Fields", ctype, w, p_gain) -> "_Canvas":
+        """The canvas of the crops: materials, mixing, gain with the row pattern (triangle wave of ``w``)."""
         tri = w - np.floor(w)
         tri -= _F32(0.5)
         np.abs(tri, out=tri)
         tri *= _F32(4.0)
         tri -= _F32(1.0)                             # row pattern: triangle wave in [-1, 1]
-        alpha = _CROP_A0[ctype] + _CROP_AMP[ctype] * tri + _F32(0.15) * n40 + _F32(0.08) * n5
+        alpha = _CROP_A0[ctype] + _CROP_AMP[ctype] * tri + _F32(0.15) * f.n40 + _F32(0.08) * f.n5
         _clip01(alpha)
         gain = _CROP_FAMP[ctype] * tri
         gain += _F32(1.0)
-        gain += _F32(0.03) * n2 + _F32(0.04) * n12
+        gain += _F32(0.03) * f.n2 + _F32(0.04) * f.n12
         gain *= p_gain
-        m1 = _CROP_M1[ctype]
-        m2 = _CROP_M2[ctype]
-        cls = _CROP_CLS[ctype]
-        # margins (hedges / grass strips) and gravel tracks on some strip boundaries
-        margin = np.minimum(du, dv) < p_wmarg
-        if margin.any():
-            _put(m1, margin, _M["dry_grass"])
-            _put(m2, margin, _M["pasture"])
-            _put(m1, margin & p_hedge, _M["hedge"])
-            _put(alpha, margin, 0.5)
-        track = ((strips.take(1, ik) != 0) & (vf - lo < _F32(1.7))) | \
-                ((strips.take(1, ik_hi) != 0) & (hi - vf < _F32(1.7)))
+        return _Canvas(m1=_CROP_M1[ctype], m2=_CROP_M2[ctype], alpha=alpha, gain=gain, cls=_CROP_CLS[ctype])
 
-        # ---- water, shores, built-up blocks, forest --------------------------------
-        water = nw + _F32(0.012) * n12 < self._t_water
-        shore = ~water & (nw < self._t_shore)
-        bu = np.floor(u * _F32(1.0 / self._Bu)).astype(i32)
-        bv = np.floor(v * _F32(1.0 / self._Bv)).astype(i32)
-        blocks = Lookup.around([self._block_code_cached], bu, bv, n, margin_i=self._na // self._nlu + 2,
+    def _land_masks(self, c: Coords, f: "_Fields") -> tuple:
+        """Water, shores, built-up blocks and forest; the block lookup ``(bu, bv, bcode, blocks)`` for the towns."""
+        i32 = np.intp
+        water = f.nw + _F32(0.012) * f.n12 < self._t_water
+        shore = ~water & (f.nw < self._t_shore)
+        bu = np.floor(f.u * _F32(1.0 / self._Bu)).astype(i32)
+        bv = np.floor(f.v * _F32(1.0 / self._Bv)).astype(i32)
+        blocks = Lookup.around([self._block_code_cached], bu, bv, f.n, margin_i=self._na // self._nlu + 2,
                                margin_j=self._nb // self._nlv + 2)
         bcode = blocks.take(0, blocks.index(bu, bv))
         urban = (bcode > 0) & ~water
-        forest = nf + _F32(0.04) * n12 > self._t_forest
+        forest = f.nf + _F32(0.04) * f.n12 > self._t_forest
         forest &= ~water & ~urban & ~shore
-        if forest.any():
-            dx, dy = 1.5 * self._sun_xy[0], 1.5 * self._sun_xy[1]
-            n5s = value_noise(c.shifted(dx, dy), 5.0, S[11])
-            n37 = value_noise(c, 3.7, S[19])         # a second, incommensurate lattice: rounder crowns
-            crown = _STAND_W2[p_stand] * n2
-            crown += n5
-            crown += n37
-            crown *= _F32(0.8)
-            crown += _STAND_A0[p_stand] + _F32(0.2) * n12
-            _put(alpha, forest, _clip01(crown))
-            n5s -= n5
-            n5s += value_noise(c.shifted(dx, dy), 3.7, S[19])
-            n5s -= n37
-            n5s *= _F32(-0.9)
-            n5s += _F32(1.0)                         # crowns brighter on their sunny side
-            n5s *= _F32(1.0) + _F32(0.06) * n40
-            _put(gain, forest, n5s)
-            _put(m1, forest, _STAND_M1[p_stand])
-            _put(m2, forest, _STAND_M2[p_stand])
-            _put(cls, forest, LandCover.FOREST)
-        if shore.any():                              # natural banks around water
-            _put(m1, shore, _M["pasture"])
-            _put(m2, shore, _M["shrub"])
-            _put(alpha, shore, _clip01(_F32(0.5) + _F32(0.8) * n5 + _F32(0.3) * n12))
-            _put(cls, shore, LandCover.GRASSLAND)
+        return water, shore, urban, forest, (bu, bv, bcode, blocks)
 
-        # ---- roads -------------------------------------------------------------
+    def _paint_forest(self, c: Coords, f: "_Fields", cv: "_Canvas", forest, p_stand) -> None:
+        """Forest stands: round crowns, brighter on their sunny side."""
+        S = self._salt
+        dx, dy = 1.5 * self._sun_xy[0], 1.5 * self._sun_xy[1]
+        n5s = value_noise(c.shifted(dx, dy), 5.0, S[11])
+        n37 = value_noise(c, 3.7, S[19])         # a second, incommensurate lattice: rounder crowns
+        crown = _STAND_W2[p_stand] * f.n2
+        crown += f.n5
+        crown += n37
+        crown *= _F32(0.8)
+        crown += _STAND_A0[p_stand] + _F32(0.2) * f.n12
+        _put(cv.alpha, forest, _clip01(crown))
+        n5s -= f.n5
+        n5s += value_noise(c.shifted(dx, dy), 3.7, S[19])
+        n5s -= n37
+        n5s *= _F32(-0.9)
+        n5s += _F32(1.0)                         # crowns brighter on their sunny side
+        n5s *= _F32(1.0) + _F32(0.06) * f.n40
+        _put(cv.gain, forest, n5s)
+        _put(cv.m1, forest, _STAND_M1[p_stand])
+        _put(cv.m2, forest, _STAND_M2[p_stand])
+        _put(cv.cls, forest, LandCover.FOREST)
+
+    def _paint_roads(self, c: Coords, f: "_Fields", cv: "_Canvas", track, water, urban) -> None:
+        """Straight roads on two grids (every other one bright concrete), winding roads, the gravel tracks."""
+        i32 = np.intp
         road = track.copy()
         bright = track.copy()
-        for d, a_coord, b_coord in ((0, u, v), (1, v, u)):
+        for d, a_coord, b_coord in ((0, f.u, f.v), (1, f.v, f.u)):
             kr = np.floor(a_coord * _F32(1.0 / self._Sr) + _F32(0.5)).astype(i32)
             seg = np.floor(b_coord * _F32(1.0 / self._Sr)).astype(i32)
             look = Lookup.around([lambda k, s, d=d: self._road_pos(k, d), lambda k, s, d=d: self._road_hw(k, s, d)],
-                                 kr, seg, n)
+                                 kr, seg, f.n)
             ir = look.index(kr, seg)
             dist = a_coord - look.take(0, ir)
             np.abs(dist, out=dist)
@@ -707,56 +777,42 @@ class ProceduralTexture:
         road &= ~urban
         if road.any():
             mat = np.where(bright, np.where(track, _U8(_M["gravel"]), _U8(_M["concrete"])), _U8(_M["asphalt"]))
-            _put(m1, road, mat)
-            _put(alpha, road, 1.0)
-            _put(gain, road, _F32(1.0) + _F32(0.04) * n2)
-            _put(cls, road, LandCover.ROAD)
+            _put(cv.m1, road, mat)
+            _put(cv.alpha, road, 1.0)
+            _put(cv.gain, road, _F32(1.0) + _F32(0.04) * f.n2)
+            _put(cv.cls, road, LandCover.ROAD)
 
-        shadow = None
-        if urban.any():
-            shadow = np.zeros(shape, dtype=_F32)
-            self._urban(urban, u, v, bu, bv, bcode, blocks, n2, n5, n12, m1, m2, alpha, gain, shadow, cls,
-                        want_shadows=want_bands)
+    def _clouds(self, c: Coords, cv: "_Canvas") -> tuple:
+        """Cloud opacity, the opacity of the clouds whose shadow falls here, cloud brightness; cloud classes."""
+        nc = self._macro_field(c, "cloud")
+        cloud = _smooth(np.clip((nc - self._t_cloud) * _F32(15.0) + _F32(0.5), _F32(0), _F32(1)))
+        L = self.cloud_height_m / self._tan_e
+        ncs = self._macro_field(c.shifted(L * self._sun_xy[0], L * self._sun_xy[1]), "cloud")
+        cshadow = _smooth(np.clip((ncs - self._t_cloud) * _F32(15.0) + _F32(0.5), _F32(0), _F32(1)))
+        _put(cv.cls, cloud >= _F32(0.5), LandCover.CLOUD)
+        cloud_bright = _F32(0.88) + _F32(0.12) * np.clip((nc - self._t_cloud) * _F32(2.0), _F32(0), _F32(1))
+        return cloud, cshadow, cloud_bright
 
-        # ---- water (dark, nearly uniform; a little brighter near the shore) -------
-        if water.any():
-            _put(m1, water, _M["shallow_water"])
-            _put(m2, water, _M["deep_water"])
-            _put(alpha, water, np.clip((nw - self._t_water) * _F32(12.0) + _F32(0.6), _F32(0), _F32(0.6)))
-            _put(gain, water, _F32(1.0) + _F32(0.01) * n40)
-            _put(cls, water, LandCover.WATER)
-
-        # ---- clouds (smooth, bright) and their shadows ---------------------------
-        cloud = cshadow = cloud_bright = None
-        if self.cloud_fraction > 0:
-            nc = self._macro_field(c, "cloud")
-            cloud = _smooth(np.clip((nc - self._t_cloud) * _F32(15.0) + _F32(0.5), _F32(0), _F32(1)))
-            L = self.cloud_height_m / self._tan_e
-            ncs = self._macro_field(c.shifted(L * self._sun_xy[0], L * self._sun_xy[1]), "cloud")
-            cshadow = _smooth(np.clip((ncs - self._t_cloud) * _F32(15.0) + _F32(0.5), _F32(0), _F32(1)))
-            _put(cls, cloud >= _F32(0.5), LandCover.CLOUD)
-            cloud_bright = _F32(0.88) + _F32(0.12) * np.clip((nc - self._t_cloud) * _F32(2.0), _F32(0), _F32(1))
-
-        if not want_bands:
-            return cls, None
-
-        # ---- reflectance per band ----------------------------------------------
-        i1 = m1.astype(np.intp)
-        i2 = m2.astype(np.intp)
-        beta = _F32(1.0) - alpha
+    def _reflectance(self, cv: "_Canvas", shape, shadow, shading, clouds, cloud_irradiance: float) -> np.ndarray:
+        """Reflectance per output band: the two materials mixed, building and cloud shadows, terrain shading,
+        clouds on top; PAN as the weighted sum of the visible and NIR bands."""
+        i1 = cv.m1.astype(np.intp)
+        i2 = cv.m2.astype(np.intp)
+        beta = _F32(1.0) - cv.alpha
         vis_nir = []
         for b in range(4):
             t = _REFL[b]
             r = t[i1]
-            r *= alpha
+            r *= cv.alpha
             r += t[i2] * beta
-            r *= gain
+            r *= cv.gain
             k = _SHADOW_K[b]
             if shadow is not None:
                 r *= _F32(1.0) - shadow * (_F32(1.0) - k)
             if shading is not None:  # terrain shading lights the ground, not the clouds above it
                 r *= shading
-            if cloud is not None:
+            if clouds is not None:
+                cloud, cshadow, cloud_bright = clouds
                 r *= _F32(1.0) - _F32(0.85) * cshadow * (_F32(1.0) - k)
                 top = _CLOUD_REFL[b] * cloud_bright
                 if shading is not None:
@@ -772,7 +828,7 @@ class ProceduralTexture:
                     p += vis_nir[b] * _F32(PAN_WEIGHTS[b])
             else:
                 out[o] = vis_nir[BAND_NAMES.index(name)]
-        return cls, out
+        return out
 
     def _urban(self, urban, u, v, bu, bv, bcode, blocks, n2, n5, n12, m1, m2, alpha, gain, shadow, cls, *,
                want_shadows=True):
