@@ -551,21 +551,110 @@ def _match_compiled(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, min_quali
                        flags=flags, std_line=out[:, 4].copy(), std_col=out[:, 5].copy())
 
 
+# ---------------------------------------------------------------------------
+# batched NumPy implementation, one chunk of points
+
+
 def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_quality, max_std,
                  order, max_iter, tol) -> dict:
-    n = la.shape[0]
-    npx = h * w
-    hl, hc = h // 2, w // 2
-    g = _G
-    idx = np.arange(n)
-    flags = np.zeros(n, dtype=np.int64)
+    """Match one chunk of points with the batched NumPy implementation.
 
+    Runs the steps in turn: window extraction, integer NCC search,
+    Gauss-Newton design, sub-pixel refinement with the residual of
+    ``method``, then quality, precision and flags.
+
+    Parameters
+    ----------
+    image_a, image_b : ndarray, shape (lines, columns)
+        The two bands, checked by :func:`match_points`.
+    la, ca, pl, pc : ndarray of float, shape (N,)
+        Points in A and their predicted positions in B (px).
+    h, w, sl, sc, method, min_quality, max_std, order, max_iter, tol
+        Options of :func:`match_points` (window, search half-range, ...).
+
+    Returns
+    -------
+    dict
+        The fields of :class:`MatchResult`, one entry per point.
+    """
+    win = _extract_windows(image_a, image_b, la, ca, pl, pc, h=h, w=w, sl=sl, sc=sc, order=order)
+    a_z, a_norm2, a_norm, flat_a = _a_window_stats(win.a_patch, win.a_ref, h, w)
+    il, ic, peak, flat_b, patch = _ncc_integer_peak(a_z, a_norm, win.b_big, h=h, w=w, sl=sl, sc=sc, order=order)
+    jac, jmean, normal = _gauss_newton_design(win.a_patch, a_z, h, w)
+    singular, ninv = _normal_inverse(normal, flat_a | flat_b)
+    # hopeless points are not refined: outside the image, no data, or an
+    # integer peak far below the quality threshold (clouds, unrelated bands)
+    flags = win.flags
+    unusable = flags != 0
+    hopeless = unusable | (peak < min_quality - 0.2)
+
+    ctx = _RefineContext(
+        b_big=win.b_big, jac=jac, jmean=jmean,
+        lk=np.concatenate([ninv[:, 1:, :], normal[:, None, :, 0]], axis=1),  # (N, 3, 3) step operator
+        inv_a2=1.0 / np.where(a_norm2 > 0, a_norm2, 1.0), ninv_d=np.stack([ninv[:, 1, 1], ninv[:, 2, 2]], axis=1),
+        h=h, w=w, sl=sl, sc=sc, order=order,
+        fa=np.fft.rfft2(a_z) if method == "phase" else None,
+        grids=_phase_grids(h, w) if method == "phase" else None)
+    state = _RefineState.start(il, ic, patch, converged=singular | hopeless)
+    _refine(ctx, state, method=method, max_iter=max_iter, tol=tol)
+
+    quality, std_l, std_c = _quality_and_std(state.stats, peak, a_norm, a_norm2, ninv, hopeless=hopeless,
+                                             singular=singular, npx=h * w)
+    d = state.d
+    off_l = (state.il - sl) + d[:, 0]
+    off_c = (state.ic - sc) + d[:, 1]
+    _final_flags(flags, off_l, off_c, d, quality, std_l, std_c, singular=singular, converged=state.converged,
+                 hopeless=hopeless, sl=sl, sc=sc, min_quality=min_quality, max_std=max_std)
+    quality = np.where(singular | unusable, np.nan, quality)
+    return {
+        "line_b": win.c0_l + off_l + (la - win.ra_l), "col_b": win.c0_c + off_c + (ca - win.ra_c),
+        "quality": quality, "valid": flags == 0, "flags": flags, "std_line": std_l, "std_col": std_c,
+    }
+
+
+@dataclass
+class _Windows:
+    """Gathered windows of a chunk (see :func:`_extract_windows`)."""
+
+    ra_l: np.ndarray  #: rounded points in A (int64)
+    ra_c: np.ndarray
+    c0_l: np.ndarray  #: centre of the search grid in B (int64)
+    c0_c: np.ndarray
+    a_patch: np.ndarray  #: A window + gradient support, level removed (float32)
+    b_big: np.ndarray  #: B search area + interpolation support, level removed (float32)
+    a_ref: np.ndarray  #: level removed from each A patch (float64)
+    flags: np.ndarray  #: OUT_OF_BOUNDS and NO_DATA so far (int64)
+
+
+def _extract_windows(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, order) -> _Windows:
+    """Gather the A and B patches of every point, with their levels removed.
+
+    Parameters
+    ----------
+    image_a, image_b : ndarray, shape (lines, columns)
+        The two bands.
+    la, ca, pl, pc : ndarray of float, shape (N,)
+        Points in A and predicted positions in B (px).
+    h, w, sl, sc, order : int, keyword-only
+        Window size, search half-range and Lanczos order.
+
+    Returns
+    -------
+    _Windows
+        A patches of ``(h + 2 _G, w + 2 _G)`` around the rounded points, B
+        patches of ``(h + 2 (sl + order), w + 2 (sc + order))`` around the
+        rounded prediction of the rounded point (local translation), both in
+        float32 with a per-point level removed and non-finite pixels zeroed,
+        and the ``OUT_OF_BOUNDS`` / ``NO_DATA`` flags.
+    """
+    n = la.shape[0]
+    g = _G
+    hl, hc = h // 2, w // 2
+    flags = np.zeros(n, dtype=np.int64)
     ra_l, ra_c = np.rint(la).astype(np.int64), np.rint(ca).astype(np.int64)
     # prediction for the rounded A point (local translation model)
     pr_l, pr_c = pl - (la - ra_l), pc - (ca - ra_c)
     c0_l, c0_c = np.rint(pr_l).astype(np.int64), np.rint(pr_c).astype(np.int64)
-
-    # --- gather A (window + gradient support) and B (search + interpolation) -----
     a_patch, in_a = _gather(image_a, ra_l, ra_c, hl + g, hc + g)
     b_big, in_b = _gather(image_b, c0_l, c0_c, hl + sl + order, hc + sc + order)
     flags[~(in_a & in_b)] |= MatchFlag.OUT_OF_BOUNDS
@@ -583,14 +672,67 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
     a_patch -= a_ref.astype(_F32)[:, None, None]
     b_big = b_big.astype(_F32, copy=False)
     b_big -= b_ref.astype(_F32)[:, None, None]
+    return _Windows(ra_l=ra_l, ra_c=ra_c, c0_l=c0_l, c0_c=c0_c, a_patch=a_patch, b_big=b_big, a_ref=a_ref,
+                    flags=flags)
+
+
+def _a_window_stats(a_patch: np.ndarray, a_ref: np.ndarray, h: int, w: int):
+    """Zero-mean A windows, their energy and flatness.
+
+    Parameters
+    ----------
+    a_patch : ndarray of float32, shape (N, h + 2 _G, w + 2 _G)
+        A patches, level removed.
+    a_ref : ndarray of float, shape (N,)
+        The level removed (flatness is judged relative to it).
+    h, w : int
+        Window size.
+
+    Returns
+    -------
+    a_z : ndarray of float32, shape (N, h, w)
+        Zero-mean windows.
+    a_norm2, a_norm : ndarray of float64, shape (N,)
+        ``sum(a_z**2)`` and its square root.
+    flat_a : ndarray of bool, shape (N,)
+        No texture, or texture below single precision w.r.t. the level.
+    """
+    g = _G
     a_win = a_patch[:, g:g + h, g:g + w]
     a_z = a_win - a_win.mean(axis=(1, 2), keepdims=True)
     a_norm2 = np.einsum("nij,nij->n", a_z, a_z).astype(np.float64)
     a_norm = np.sqrt(a_norm2)
-    # flat: no texture, or texture below single precision w.r.t. the level
-    flat_a = ~(a_norm > 1e-6 * np.sqrt(npx) * np.abs(a_ref))
+    flat_a = ~(a_norm > 1e-6 * np.sqrt(h * w) * np.abs(a_ref))
+    return a_z, a_norm2, a_norm, flat_a
 
-    # --- integer search -----------------------------------------------------------
+
+def _ncc_integer_peak(a_z, a_norm, b_big, *, h, w, sl, sc, order):
+    """Integer NCC peak of each A window over its search grid in B.
+
+    Parameters
+    ----------
+    a_z : ndarray of float32, shape (N, h, w)
+        Zero-mean A windows.
+    a_norm : ndarray of float64, shape (N,)
+        Their norms.
+    b_big : ndarray of float32, shape (N, h + 2 (sl + order), w + 2 (sc + order))
+        B search areas with the interpolation support.
+    h, w, sl, sc, order : int, keyword-only
+        Window size, search half-range and Lanczos order.
+
+    Returns
+    -------
+    il, ic : ndarray of int64, shape (N,)
+        Peak offset in the search grid (``sl``, ``sc`` is its centre).
+    peak : ndarray of float64, shape (N,)
+        NCC at the peak (``-inf`` where B is flat everywhere).
+    flat_b : ndarray of bool, shape (N,)
+        B flat at every offset.
+    patch : ndarray of float32, shape (N, h + 2 order, w + 2 order)
+        B window on the peak with its interpolation support (a copy).
+    """
+    n = a_z.shape[0]
+    idx = np.arange(n)
     region = b_big[:, order:order + h + 2 * sl, order:order + w + 2 * sc]
     surf = _integer_search(a_z, a_norm, region, h, w).reshape(n, -1)
     k = np.argmax(surf, axis=1)
@@ -598,8 +740,31 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
     flat_b = ~np.isfinite(surf[idx, k])
     hp, wp = h + 2 * order, w + 2 * order  # B patch on the integer peak + support
     patch = np.lib.stride_tricks.sliding_window_view(b_big, (hp, wp), axis=(1, 2))[idx, il, ic]
+    return il, ic, surf[idx, k].astype(np.float64), flat_b, patch
 
-    # --- Gauss-Newton design: zero-mean [A, dA/dl, dA/dc], fixed -------------------
+
+def _gauss_newton_design(a_patch, a_z, h, w):
+    """Fixed Gauss-Newton design ``[a_z, dA/dl, dA/dc]`` and its normal matrix.
+
+    Parameters
+    ----------
+    a_patch : ndarray of float32, shape (N, h + 2 _G, w + 2 _G)
+        A patches (the gradient filter reads ``_G`` pixels around the window).
+    a_z : ndarray of float32, shape (N, h, w)
+        Zero-mean A windows.
+    h, w : int
+        Window size.
+
+    Returns
+    -------
+    jac : ndarray of float32, shape (N, 3, h * w)
+        Design columns; the gradients keep their means.
+    jmean : ndarray of float64, shape (N, 3)
+        Means of the columns (0 for ``a_z``), removed in every product.
+    normal : ndarray of float64, shape (N, 3, 3)
+        Normal matrix of the zero-mean columns.
+    """
+    n, npx, g = a_z.shape[0], h * w, _G
     jac = np.empty((n, 3, h, w), dtype=_F32)
     jac[:, 0] = a_z
     for ax, view in ((1, lambda t: a_patch[:, t:t + h, g:g + w]), (2, lambda t: a_patch[:, g:g + h, t:t + w])):
@@ -611,44 +776,112 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
             out += _F32(_GRADIENT[g + t]) * (view(g + t) - view(g - t))
     # the columns must be orthogonal to a constant (the offset between the
     # bands): the gradients' means are removed in the normal matrix and in the
-    # products with B below, not from the arrays
+    # products with B, not from the arrays
     jac = jac.reshape(n, 3, npx)
     jmean = jac.mean(axis=2, dtype=np.float64)
     jmean[:, 0] = 0.0  # a_z is zero-mean already
     normal = np.einsum("nqp,nrp->nqr", jac, jac).astype(np.float64) - npx * jmean[:, :, None] * jmean[:, None, :]
+    return jac, jmean, normal
+
+
+def _normal_inverse(normal, degenerate):
+    """Singular designs and the inverse normal matrices.
+
+    Parameters
+    ----------
+    normal : ndarray of float64, shape (N, 3, 3)
+        Normal matrices; those of singular points are set to the identity,
+        in place.
+    degenerate : ndarray of bool, shape (N,)
+        Points already known to be flat (A or B).
+
+    Returns
+    -------
+    singular : ndarray of bool, shape (N,)
+        ``degenerate``, or a correlation matrix of determinant <= 1e-6.
+    ninv : ndarray of float64, shape (N, 3, 3)
+        Inverse normal matrices.
+    """
     dsc = np.sqrt(np.einsum("nii->ni", normal))
     with np.errstate(divide="ignore", invalid="ignore"):
         det_corr = _inv3(normal / (dsc[:, :, None] * dsc[:, None, :]))[1]
-    singular = ~(det_corr > 1e-6) | flat_a | flat_b
+    singular = ~(det_corr > 1e-6) | degenerate
     normal[singular] = np.eye(3)
-    ninv = _inv3(normal)[0]
-    # hopeless points are not refined: outside the image, no data, or an
-    # integer peak far below the quality threshold (clouds, unrelated bands)
-    peak = surf[idx, k].astype(np.float64)
-    unusable = flags != 0
-    hopeless = unusable | (peak < min_quality - 0.2)
+    return singular, _inv3(normal)[0]
 
-    # --- sub-pixel iterations; the active set shrinks as points converge ---------
-    # F(d), the shift the estimator still sees from d, has its root at the match
-    # and a slope matrix S = -dF/dd that is the identity only for identical,
-    # isotropic windows; S is learnt per point by Broyden's rank-one update
-    # (coupled axes, cross-band contrast) and the step is S^-1 F, at most
-    # _MAX_STEP px per axis.
-    d = np.zeros((n, 2))  # shift from the integer peak (lines, columns), px
-    stats = np.full((n, 4), np.nan)  # <a_z, B~>, <g_l, B~>, <g_c, B~>, |B~ - mean|^2
-    slope = np.tile(np.eye(2), (n, 1, 1))
-    prev = np.zeros((n, 4))  # previous (d_l, d_c, F_l, F_c)
-    converged = singular | hopeless
-    gave_up = np.zeros(n, dtype=bool)
-    hist = np.full((n, 2), np.inf)  # step sizes of the two previous iterations, px
-    swv = np.lib.stride_tricks.sliding_window_view
-    if method == "phase":
-        fa = np.fft.rfft2(a_z)
-        grids = _phase_grids(h, w)
-    lk = np.concatenate([ninv[:, 1:, :], normal[:, None, :, 0]], axis=1)  # (N, 3, 3) step operator
-    inv_a2 = 1.0 / np.where(a_norm2 > 0, a_norm2, 1.0)
-    ninv_d = np.stack([ninv[:, 1, 1], ninv[:, 2, 2]], axis=1)
-    active = np.flatnonzero(~converged)
+
+@dataclass
+class _RefineContext:
+    """What the sub-pixel iterations read and never change."""
+
+    b_big: np.ndarray  #: B search areas + support (N, ...), float32
+    jac: np.ndarray  #: design (N, 3, h w), float32
+    jmean: np.ndarray  #: column means (N, 3)
+    lk: np.ndarray  #: Gauss-Newton step operator (N, 3, 3): rows 1, 2 of N^-1, then column 0 of N
+    inv_a2: np.ndarray  #: 1 / sum(a_z**2) (N,)
+    ninv_d: np.ndarray  #: diagonal (1, 1), (2, 2) of N^-1 (N, 2)
+    h: int
+    w: int
+    sl: int
+    sc: int
+    order: int
+    fa: np.ndarray | None  #: rfft2 of the A windows ("phase" only)
+    grids: tuple | None  #: :func:`_phase_grids` ("phase" only)
+
+    @property
+    def npx(self) -> int:
+        return self.h * self.w
+
+
+@dataclass
+class _RefineState:
+    """Per-point state of the sub-pixel iterations, updated in place."""
+
+    il: np.ndarray  #: integer base in the search grid (int64)
+    ic: np.ndarray
+    patch: np.ndarray  #: B window + support on the base (N, h + 2 order, w + 2 order)
+    d: np.ndarray  #: shift from the base (N, 2), px
+    stats: np.ndarray  #: <a_z, B~>, <g_l, B~>, <g_c, B~>, |B~ - mean|^2 at the last sample (N, 4)
+    slope: np.ndarray  #: Broyden slope matrices (N, 2, 2)
+    prev: np.ndarray  #: previous (d_l, d_c, F_l, F_c) (N, 4)
+    converged: np.ndarray  #: (N,) bool
+    gave_up: np.ndarray  #: (N,) bool, stalled
+    hist: np.ndarray  #: step sizes of the two previous iterations (N, 2), px
+
+    @classmethod
+    def start(cls, il, ic, patch, *, converged) -> "_RefineState":
+        """State at the integer peak; points already ``converged`` are not refined."""
+        n = il.shape[0]
+        return cls(il=il, ic=ic, patch=patch, d=np.zeros((n, 2)), stats=np.full((n, 4), np.nan),
+                   slope=np.tile(np.eye(2), (n, 1, 1)), prev=np.zeros((n, 4)), converged=converged,
+                   gave_up=np.zeros(n, dtype=bool), hist=np.full((n, 2), np.inf))
+
+
+def _refine(ctx: _RefineContext, s: _RefineState, *, method, max_iter, tol) -> None:
+    """Sub-pixel iterations, shared by both methods; updates ``s`` in place.
+
+    ``F(d)``, the shift the estimator (:func:`_ncc_residual` or
+    :func:`_phase_residual`) still sees from ``d``, has its root at the match
+    and a slope matrix ``S = -dF/dd`` that is the identity only for identical,
+    isotropic windows; ``S`` is learnt per point by Broyden's rank-one update
+    and the step is ``S^-1 F``, at most ``_MAX_STEP`` px per axis
+    (:func:`_secant_step`). The active set shrinks as points converge or stall.
+
+    Parameters
+    ----------
+    ctx : _RefineContext
+        Fixed inputs.
+    s : _RefineState
+        State, updated in place; ``s.stats`` ends at the final positions.
+    method : {"ncc", "phase"}, keyword-only
+        Residual estimator.
+    max_iter : int, keyword-only
+        Maximum number of steps.
+    tol : float, keyword-only
+        Convergence threshold on the step (px).
+    """
+    n = s.d.shape[0]
+    active = np.flatnonzero(~s.converged)
     for it in range(max_iter + 1):
         if active.size == 0:
             break
@@ -656,103 +889,246 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
         # and freeze the converged ones; then on the shrinking active subset
         full = active.size > (9 * n) // 10
         sel = slice(None) if full else active
-        live = ~(converged | gave_up) if full else np.ones(active.size, dtype=bool)
-        if it == 0:  # at the integer peak: no resampling
-            b_res = patch[sel, order:order + h, order:order + w]
-        else:
-            wts = _lanczos_weights(d[sel], order).astype(_F32)  # (n, 2, taps)
-            b_res = _resample(patch[sel], wts[:, 0], wts[:, 1])
-        b_flat = b_res.reshape(-1, npx)
-        b_sum = b_flat.sum(axis=1, dtype=np.float64)
-        c = np.matmul(jac[sel], b_flat[:, :, None])[:, :, 0].astype(np.float64) - jmean[sel] * b_sum[:, None]
-        sb = np.einsum("np,np->n", b_flat, b_flat).astype(np.float64) - b_sum * b_sum / npx
+        live = ~(s.converged | s.gave_up) if full else np.ones(active.size, dtype=bool)
+        b_res, b_sum, c, sb = _sample_b(ctx, s, sel, it)
         st = np.concatenate([c, sb[:, None]], axis=1)
         if full:
-            stats[live] = st[live]
+            s.stats[live] = st[live]
         else:
-            stats[sel] = st
+            s.stats[sel] = st
         if it == max_iter:
             break
-        gain = c[:, 0] * inv_a2[sel]
-        if method == "ncc" or it == 0:
-            # Gauss-Newton step with the gain projected out (variable projection)
-            op = lk[sel]
-            rhs = c - gain[:, None] * op[:, 2]
-            safe = -1.0 / np.where(np.abs(gain) > 1e-12, gain, 1.0)
-            f = np.stack([np.einsum("nj,nj->n", op[:, 0], rhs),
-                          np.einsum("nj,nj->n", op[:, 1], rhs)], axis=1) * safe[:, None]
-        ph = f
-        if method == "phase":
-            b_c = b_res - (b_sum / npx).astype(_F32)[:, None, None]
-            ph = np.column_stack(_phase_shift(fa[sel], b_c, grids))
-            f = ph if it > 0 else f  # the first move is the Lucas-Kanade step
-        d_sel = d[sel]
-        sm = slope[sel]
-        pv = prev[sel]
-        if it > 0:  # Broyden: S += (y - S s) s^T / s^T s, with y = F_prev - F, s = d - d_prev
-            ds = d_sel - pv[:, :2]
-            y = pv[:, 2:] - f
-            ss = np.einsum("ni,ni->n", ds, ds)
-            upd = (ss > 1e-8) & live
-            corr = (y - np.einsum("nij,nj->ni", sm, ds)) / np.where(upd, ss, 1.0)[:, None]
-            sm = sm + np.where(upd[:, None, None], corr[:, :, None] * ds[:, None, :], 0.0)
-            det = sm[:, 0, 0] * sm[:, 1, 1] - sm[:, 0, 1] * sm[:, 1, 0]
-            tr = sm[:, 0, 0] + sm[:, 1, 1]
-            bad = ~((det > 0.04) & (tr > 0.4) & (tr < 6.0) & (np.abs(sm).max(axis=(1, 2)) < 4.0))
-            sm[bad] = np.eye(2)
-            slope[sel] = sm
-        prev[sel] = np.where(live[:, None], np.concatenate([d_sel, ph], axis=1), pv)
-        det = sm[:, 0, 0] * sm[:, 1, 1] - sm[:, 0, 1] * sm[:, 1, 0]
-        step = np.stack([sm[:, 1, 1] * f[:, 0] - sm[:, 0, 1] * f[:, 1],
-                         sm[:, 0, 0] * f[:, 1] - sm[:, 1, 0] * f[:, 0]], axis=1) / det[:, None]
-        step = np.where(live[:, None], np.clip(step, -_MAX_STEP, _MAX_STEP), 0.0)
-        d_new = d_sel + step
-        # the match left the integer peak's cell: move the patch to the neighbour
-        # (same interpolant, so F is continuous), within the search grid
-        move = np.where(np.abs(d_new) > 0.75, np.sign(d_new), 0.0).astype(np.int64)
-        if move.any():
-            ids = np.arange(n)[sel]
-            lim = np.array([2 * sl, 2 * sc])
-            base = np.stack([il[ids], ic[ids]], axis=1)
-            move = np.where((base + move >= 0) & (base + move <= lim), move, 0)
-            mv = np.flatnonzero(move.any(axis=1))
-            if mv.size:
-                tgt = ids[mv]
-                il[tgt] += move[mv, 0]
-                ic[tgt] += move[mv, 1]
-                patch[tgt] = swv(b_big, (hp, wp), axis=(1, 2))[tgt, il[tgt], ic[tgt]]
-                d_new[mv] -= move[mv]
-                pvm = prev[tgt]
-                pvm[:, :2] -= move[mv]
-                prev[tgt] = pvm
-        d[sel] = np.clip(d_new, -0.999, 0.999)
-        # converged: the step is below tol, or immaterial (a tenth of the
-        # point's own standard deviation, e.g. across bands)
-        small = (np.abs(step) < tol).all(axis=1)
-        unsure = live & ~small
-        if unsure.any():
-            sig2 = np.maximum(sb - c[:, 0] * gain, 0.0) / max(npx - 4, 1)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                noise_step = 0.1 * np.sqrt(sig2[:, None] * ninv_d[sel]) / np.abs(gain)[:, None]
-            small |= (np.abs(step) < np.nan_to_num(noise_step)).all(axis=1)
-        # stalled: late, and the step has not shrunk in two iterations (drift
-        # along a flat direction, no root in reach): give up, NOT_CONVERGED
-        norm = np.abs(step).max(axis=1)
-        stalled = np.zeros_like(small)
-        if it >= _STALL_IT:
-            stalled = ~small & (norm > 0.8 * hist[sel, 1])
-        hist[sel] = np.where(live[:, None], np.stack([norm, hist[sel, 0]], axis=1), hist[sel])
-        stop = small | stalled
-        if full:
-            converged |= live & small
-            gave_up |= live & stalled
-            active = np.flatnonzero(~(converged | gave_up))
+        gain = c[:, 0] * ctx.inv_a2[sel]
+        if method == "ncc":
+            f = ph = _ncc_residual(ctx, sel, c, gain)
         else:
-            converged[active[small]] = True
-            gave_up[active[stalled]] = True
-            active = active[~stop]
+            f, ph = _phase_residual(ctx, sel, it, b_res, b_sum, c, gain)
+        step = _secant_step(s, sel, live, it, f, ph)
+        _advance(ctx, s, sel, step)
+        small = _small_step(ctx, sel, live, step, c, sb, gain, tol)
+        active = _retire(s, sel, live, active, full=full, it=it, step=step, small=small)
 
-    # --- quality and a-posteriori precision --------------------------------------
+
+def _sample_b(ctx: _RefineContext, s: _RefineState, sel, it: int):
+    """B at the current positions of the points ``sel`` and its products with the design.
+
+    Returns
+    -------
+    b_res : ndarray of float32, shape (n, h, w)
+        B on the base (iteration 0), else resampled at ``s.d``.
+    b_sum : ndarray of float64, shape (n,)
+        Its sums.
+    c : ndarray of float64, shape (n, 3)
+        Products with the zero-mean design columns.
+    sb : ndarray of float64, shape (n,)
+        ``|B~ - mean|^2``.
+    """
+    h, w, o, npx = ctx.h, ctx.w, ctx.order, ctx.npx
+    if it == 0:  # at the integer peak: no resampling
+        b_res = s.patch[sel, o:o + h, o:o + w]
+    else:
+        wts = _lanczos_weights(s.d[sel], o).astype(_F32)  # (n, 2, taps)
+        b_res = _resample(s.patch[sel], wts[:, 0], wts[:, 1])
+    b_flat = b_res.reshape(-1, npx)
+    b_sum = b_flat.sum(axis=1, dtype=np.float64)
+    c = np.matmul(ctx.jac[sel], b_flat[:, :, None])[:, :, 0].astype(np.float64) - ctx.jmean[sel] * b_sum[:, None]
+    sb = np.einsum("np,np->n", b_flat, b_flat).astype(np.float64) - b_sum * b_sum / npx
+    return b_res, b_sum, c, sb
+
+
+def _ncc_residual(ctx: _RefineContext, sel, c, gain):
+    """``"ncc"`` residual shift: Gauss-Newton step with the gain projected out.
+
+    Parameters
+    ----------
+    ctx : _RefineContext
+        Fixed inputs (``lk``, the step operator).
+    sel : slice or ndarray of int
+        Points worked on.
+    c : ndarray of float64, shape (n, 3)
+        Products of B with the design (:func:`_sample_b`).
+    gain : ndarray of float64, shape (n,)
+        Gain between the bands, ``c[:, 0] / |a_z|^2``.
+
+    Returns
+    -------
+    ndarray of float64, shape (n, 2)
+        ``F`` (lines, columns), px (variable projection).
+    """
+    op = ctx.lk[sel]
+    rhs = c - gain[:, None] * op[:, 2]
+    safe = -1.0 / np.where(np.abs(gain) > 1e-12, gain, 1.0)
+    return np.stack([np.einsum("nj,nj->n", op[:, 0], rhs),
+                     np.einsum("nj,nj->n", op[:, 1], rhs)], axis=1) * safe[:, None]
+
+
+def _phase_residual(ctx: _RefineContext, sel, it: int, b_res, b_sum, c, gain):
+    """``"phase"`` residual shift from the phase plane of the cross-power spectrum.
+
+    Parameters
+    ----------
+    ctx : _RefineContext
+        Fixed inputs (``fa``, ``grids``).
+    sel : slice or ndarray of int
+        Points worked on.
+    it : int
+        Iteration number: the first move (``it == 0``) is the Lucas-Kanade
+        step, the phase of a 3-line window says little about a larger shift.
+    b_res, b_sum, c, gain
+        B sampled at the current positions, its sums and products with the
+        design (:func:`_sample_b`), the gain between the bands.
+
+    Returns
+    -------
+    f : ndarray of float64, shape (n, 2)
+        ``F`` that drives the step (px).
+    ph : ndarray of float64, shape (n, 2)
+        Phase-plane shift, the ``F`` the Broyden update remembers.
+    """
+    b_c = b_res - (b_sum / ctx.npx).astype(_F32)[:, None, None]
+    ph = np.column_stack(_phase_shift(ctx.fa[sel], b_c, ctx.grids))
+    if it == 0:
+        return _ncc_residual(ctx, sel, c, gain), ph
+    return ph, ph
+
+
+def _secant_step(s: _RefineState, sel, live, it: int, f, ph):
+    """Broyden update of the slope matrices, then the bounded step ``S^-1 F``.
+
+    Parameters
+    ----------
+    s : _RefineState
+        ``slope`` and ``prev`` are updated in place for the points ``sel``.
+    sel : slice or ndarray of int
+        Points worked on.
+    live : ndarray of bool, shape (n,)
+        Points of ``sel`` still iterating (the others are frozen).
+    it : int
+        Iteration number (no update at 0).
+    f, ph : ndarray of float64, shape (n, 2)
+        Residual driving the step, and the one remembered for the next update.
+
+    Returns
+    -------
+    ndarray of float64, shape (n, 2)
+        Step (px), clipped to ``_MAX_STEP``; 0 for frozen points.
+    """
+    d_sel = s.d[sel]
+    sm = s.slope[sel]
+    pv = s.prev[sel]
+    if it > 0:  # Broyden: S += (y - S s) s^T / s^T s, with y = F_prev - F, s = d - d_prev
+        ds = d_sel - pv[:, :2]
+        y = pv[:, 2:] - f
+        ss = np.einsum("ni,ni->n", ds, ds)
+        upd = (ss > 1e-8) & live
+        corr = (y - np.einsum("nij,nj->ni", sm, ds)) / np.where(upd, ss, 1.0)[:, None]
+        sm = sm + np.where(upd[:, None, None], corr[:, :, None] * ds[:, None, :], 0.0)
+        det = sm[:, 0, 0] * sm[:, 1, 1] - sm[:, 0, 1] * sm[:, 1, 0]
+        tr = sm[:, 0, 0] + sm[:, 1, 1]
+        bad = ~((det > 0.04) & (tr > 0.4) & (tr < 6.0) & (np.abs(sm).max(axis=(1, 2)) < 4.0))
+        sm[bad] = np.eye(2)
+        s.slope[sel] = sm
+    s.prev[sel] = np.where(live[:, None], np.concatenate([d_sel, ph], axis=1), pv)
+    det = sm[:, 0, 0] * sm[:, 1, 1] - sm[:, 0, 1] * sm[:, 1, 0]
+    step = np.stack([sm[:, 1, 1] * f[:, 0] - sm[:, 0, 1] * f[:, 1],
+                     sm[:, 0, 0] * f[:, 1] - sm[:, 1, 0] * f[:, 0]], axis=1) / det[:, None]
+    return np.where(live[:, None], np.clip(step, -_MAX_STEP, _MAX_STEP), 0.0)
+
+
+def _advance(ctx: _RefineContext, s: _RefineState, sel, step) -> None:
+    """Apply ``step`` to the points ``sel``, moving the integer base when needed.
+
+    A match that leaves its integer cell (``|d| > 0.75``) moves its base to the
+    neighbour inside the search grid (same interpolant, so ``F`` stays
+    continuous); ``s.il``, ``s.ic``, ``s.patch``, ``s.prev`` and ``s.d`` are
+    updated in place, ``d`` clipped to ``(-1, 1)``.
+    """
+    d_new = s.d[sel] + step
+    move = np.where(np.abs(d_new) > 0.75, np.sign(d_new), 0.0).astype(np.int64)
+    if move.any():
+        ids = np.arange(s.d.shape[0])[sel]
+        lim = np.array([2 * ctx.sl, 2 * ctx.sc])
+        base = np.stack([s.il[ids], s.ic[ids]], axis=1)
+        move = np.where((base + move >= 0) & (base + move <= lim), move, 0)
+        mv = np.flatnonzero(move.any(axis=1))
+        if mv.size:
+            tgt = ids[mv]
+            s.il[tgt] += move[mv, 0]
+            s.ic[tgt] += move[mv, 1]
+            hp, wp = ctx.h + 2 * ctx.order, ctx.w + 2 * ctx.order
+            swv = np.lib.stride_tricks.sliding_window_view
+            s.patch[tgt] = swv(ctx.b_big, (hp, wp), axis=(1, 2))[tgt, s.il[tgt], s.ic[tgt]]
+            d_new[mv] -= move[mv]
+            pvm = s.prev[tgt]
+            pvm[:, :2] -= move[mv]
+            s.prev[tgt] = pvm
+    s.d[sel] = np.clip(d_new, -0.999, 0.999)
+
+
+def _small_step(ctx: _RefineContext, sel, live, step, c, sb, gain, tol):
+    """Converged points: the step is below ``tol``, or immaterial.
+
+    Immaterial: below a tenth of the point's own standard deviation (e.g.
+    across bands), from the fit residual ``sb - c[:, 0] * gain``.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+    """
+    small = (np.abs(step) < tol).all(axis=1)
+    unsure = live & ~small
+    if unsure.any():
+        sig2 = np.maximum(sb - c[:, 0] * gain, 0.0) / max(ctx.npx - 4, 1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            noise_step = 0.1 * np.sqrt(sig2[:, None] * ctx.ninv_d[sel]) / np.abs(gain)[:, None]
+        small |= (np.abs(step) < np.nan_to_num(noise_step)).all(axis=1)
+    return small
+
+
+def _retire(s: _RefineState, sel, live, active, *, full, it, step, small):
+    """Mark converged and stalled points; return the new active set.
+
+    Stalled: from iteration ``_STALL_IT`` on, the step has not shrunk in two
+    iterations (drift along a flat direction, no root in reach): the point is
+    given up (``NOT_CONVERGED``). Updates ``s.hist``, ``s.converged`` and
+    ``s.gave_up`` in place.
+    """
+    norm = np.abs(step).max(axis=1)
+    stalled = np.zeros_like(small)
+    if it >= _STALL_IT:
+        stalled = ~small & (norm > 0.8 * s.hist[sel, 1])
+    s.hist[sel] = np.where(live[:, None], np.stack([norm, s.hist[sel, 0]], axis=1), s.hist[sel])
+    if full:
+        s.converged |= live & small
+        s.gave_up |= live & stalled
+        return np.flatnonzero(~(s.converged | s.gave_up))
+    s.converged[active[small]] = True
+    s.gave_up[active[stalled]] = True
+    return active[~(small | stalled)]
+
+
+def _quality_and_std(stats, peak, a_norm, a_norm2, ninv, *, hopeless, singular, npx):
+    """Final NCC and a-posteriori standard deviations (Delon & Rouge).
+
+    Parameters
+    ----------
+    stats : ndarray of float64, shape (N, 4)
+        ``_RefineState.stats`` at the final positions.
+    peak : ndarray of float64, shape (N,)
+        Integer NCC peak, the quality of points not refined.
+    a_norm, a_norm2 : ndarray of float64, shape (N,)
+        Norms of the zero-mean A windows.
+    ninv : ndarray of float64, shape (N, 3, 3)
+        Inverse normal matrices.
+    hopeless, singular : ndarray of bool, shape (N,), keyword-only
+        Points not refined, degenerate designs.
+    npx : int, keyword-only
+        Pixels per window.
+
+    Returns
+    -------
+    quality, std_l, std_c : ndarray of float64, shape (N,)
+    """
     c0, sb = stats[:, 0], stats[:, 3]
     with np.errstate(divide="ignore", invalid="ignore"):
         quality = np.where(hopeless & ~singular, peak, c0 / (a_norm * np.sqrt(sb)))
@@ -760,9 +1136,18 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
         sigma2 = np.maximum(sb - c0 * gain, 0.0) / max(npx - 4, 1)
         std_l = np.sqrt(sigma2 * ninv[:, 1, 1]) / np.abs(gain)
         std_c = np.sqrt(sigma2 * ninv[:, 2, 2]) / np.abs(gain)
+    return quality, std_l, std_c
 
-    off_l = (il - sl) + d[:, 0]
-    off_c = (ic - sc) + d[:, 1]
+
+def _final_flags(flags, off_l, off_c, d, quality, std_l, std_c, *, singular, converged, hopeless, sl, sc,
+                 min_quality, max_std) -> None:
+    """Add the ``FLAT``, ``SEARCH_BORDER``, ``NOT_CONVERGED``, ``LOW_CORRELATION``
+    and ``IMPRECISE`` bits to ``flags``, in place.
+
+    ``off_l``, ``off_c`` are the match offsets from the search grid centre
+    (px), ``d`` the final shifts from the integer base; see
+    :func:`match_points` for the rules.
+    """
     flags[singular] |= MatchFlag.FLAT
     lim_l, lim_c = (sl or 0.5), (sc or 0.5)
     flags[(np.abs(off_l) > lim_l) | (np.abs(off_c) > lim_c)] |= MatchFlag.SEARCH_BORDER
@@ -770,11 +1155,6 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
     flags[~(quality >= min_quality)] |= MatchFlag.LOW_CORRELATION
     if max_std is not None:
         flags[~((std_l <= max_std) & (std_c <= max_std))] |= MatchFlag.IMPRECISE
-    quality = np.where(singular | unusable, np.nan, quality)
-    return {
-        "line_b": c0_l + off_l + (la - ra_l), "col_b": c0_c + off_c + (ca - ra_c),
-        "quality": quality, "valid": flags == 0, "flags": flags, "std_line": std_l, "std_col": std_c,
-    }
 
 
 def match_points_in_blocks(read_a, read_b, n_lines: tuple, lines_a, cols_a, pred_lines_b, pred_cols_b, *,
