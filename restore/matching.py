@@ -66,10 +66,13 @@ import dataclasses
 import enum
 import threading
 from dataclasses import dataclass, fields
+from typing import Callable
 
 import numpy as np
 
 __all__ = [
+    "MATCHING_METHODS",
+    "MatchingMethod",
     "match_points_in_blocks",
     "MatchFlag",
     "MatchResult",
@@ -79,7 +82,6 @@ __all__ = [
     "resample_windows",
 ]
 
-_METHODS = ("ncc", "phase")
 _BACKENDS = ("auto", "compiled", "numpy")
 #: points per batch: keeps the stacks in cache and bounds memory
 _CHUNK = 2048
@@ -479,8 +481,9 @@ def match_points(
     searched integer grid: farther than the half-range from the grid centre
     (the rounded prediction), or than 0.5 px on an axis whose half-range is 0.
     """
-    if method not in _METHODS:
-        raise ValueError(f"method: expected one of {_METHODS}, got {method!r}")
+    if method not in MATCHING_METHODS:
+        raise ValueError(f"method: expected one of {tuple(MATCHING_METHODS)}, got {method!r}")
+    spec = MATCHING_METHODS[method]
     h, w = _check_window(window)
     sl, sc = _check_search(search)
     if not -1.0 <= float(min_quality) <= 1.0:
@@ -495,7 +498,7 @@ def match_points(
         raise ValueError(f"tol: must be > 0, got {tol}")
     if backend not in _BACKENDS:
         raise ValueError(f"backend: expected one of {_BACKENDS}, got {backend!r}")
-    if backend == "compiled" and method != "ncc":
+    if backend == "compiled" and not spec.compiled:
         raise ValueError(f"backend: the compiled kernel implements method 'ncc' only, got method {method!r}")
     images = []
     for name, img in (("image_a", image_a), ("image_b", image_b)):
@@ -518,7 +521,7 @@ def match_points(
         f, i = np.zeros(0), np.zeros(0, dtype=np.int64)
         return MatchResult(line_b=f, col_b=f.copy(), quality=f.copy(), valid=np.zeros(0, dtype=bool),
                            flags=i, std_line=f.copy(), std_col=f.copy())
-    if method == "ncc" and backend != "numpy":
+    if spec.compiled and backend != "numpy":
         return _match_compiled(*images, *pts, h=h, w=w, sl=sl, sc=sc, min_quality=float(min_quality),
                                max_std=max_std, order=int(order), max_iter=int(max_iter), tol=float(tol))
     opts = dict(h=h, w=w, sl=sl, sc=sc, method=method, min_quality=float(min_quality),
@@ -593,8 +596,8 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
         lk=np.concatenate([ninv[:, 1:, :], normal[:, None, :, 0]], axis=1),  # (N, 3, 3) step operator
         inv_a2=1.0 / np.where(a_norm2 > 0, a_norm2, 1.0), ninv_d=np.stack([ninv[:, 1, 1], ninv[:, 2, 2]], axis=1),
         h=h, w=w, sl=sl, sc=sc, order=order,
-        fa=np.fft.rfft2(a_z) if method == "phase" else None,
-        grids=_phase_grids(h, w) if method == "phase" else None)
+        fa=np.fft.rfft2(a_z) if MATCHING_METHODS[method].needs_spectrum else None,
+        grids=_phase_grids(h, w) if MATCHING_METHODS[method].needs_spectrum else None)
     state = _RefineState.start(il, ic, patch, converged=singular | hopeless)
     _refine(ctx, state, method=method, max_iter=max_iter, tol=tol)
 
@@ -880,6 +883,7 @@ def _refine(ctx: _RefineContext, s: _RefineState, *, method, max_iter, tol) -> N
     tol : float, keyword-only
         Convergence threshold on the step (px).
     """
+    residual = MATCHING_METHODS[method].residual
     n = s.d.shape[0]
     active = np.flatnonzero(~s.converged)
     for it in range(max_iter + 1):
@@ -899,10 +903,7 @@ def _refine(ctx: _RefineContext, s: _RefineState, *, method, max_iter, tol) -> N
         if it == max_iter:
             break
         gain = c[:, 0] * ctx.inv_a2[sel]
-        if method == "ncc":
-            f = ph = _ncc_residual(ctx, sel, c, gain)
-        else:
-            f, ph = _phase_residual(ctx, sel, it, b_res, b_sum, c, gain)
+        f, ph = residual(ctx, sel, it, b_res, b_sum, c, gain)
         step = _secant_step(s, sel, live, it, f, ph)
         _advance(ctx, s, sel, step)
         small = _small_step(ctx, sel, live, step, c, sb, gain, tol)
@@ -1217,3 +1218,28 @@ def match_points_in_blocks(read_a, read_b, n_lines: tuple, lines_a, cols_a, pred
             arr[sel] = v + b0 if k == "line_b" else v
         out[k] = arr
     return MatchResult(**out)
+
+
+def _ncc_step(ctx: _RefineContext, sel, it: int, b_res, b_sum, c, gain):
+    """``"ncc"``: the Gauss-Newton residual drives the step and is what the Broyden update remembers."""
+    f = _ncc_residual(ctx, sel, c, gain)
+    return f, f
+
+
+@dataclass(frozen=True)
+class MatchingMethod:
+    """A sub-pixel matching method: its residual shift, whether it needs A's spectrum, whether it is compiled."""
+
+    name: str
+    description: str
+    residual: Callable
+    needs_spectrum: bool = False
+    compiled: bool = False
+
+
+#: ``restoration.match_method`` → method
+MATCHING_METHODS: dict[str, MatchingMethod] = {m.name: m for m in (
+    MatchingMethod("ncc", "normalised cross-correlation, Gauss-Newton with the gain projected out (compiled kernel)",
+                   _ncc_step, compiled=True),
+    MatchingMethod("phase", "phase plane of the cross-power spectrum (NumPy)", _phase_residual, needs_spectrum=True),
+)}

@@ -21,6 +21,7 @@ from simsat.product import Product, clamped_attitude
 from . import stages
 from .errors import RestorationError
 from .integration.methods import integration_method
+from .matching import MATCHING_METHODS
 from .result import PairData, RestorationResult
 from .settings import RestorationSettings
 from .synthesis import AXES
@@ -122,7 +123,7 @@ class Restorer:
     def match(self, product: Product, pairs_ab: list, bar) -> list[PairData]:
         """Select and match every pair (knowledge prediction, pilot-centred search)."""
         s = self.settings
-        if s.match_method == "ncc" and stages.ncc_kernel_cold():
+        if MATCHING_METHODS[s.match_method].compiled and stages.ncc_kernel_cold():
             bar.note("loading the matching kernel (compiled on first use, ~10-15 s, cached after)")
         sm = product.sensor_model()
         pairs = []

@@ -7,6 +7,7 @@ from simsat.config import ScenarioError, Section
 from simsat.validation import register_table_check
 
 from .integration import check_options, integration_method
+from .matching import MATCHING_METHODS
 from .selection import SELECTION_METHODS
 from .synthesis import AXES
 
@@ -65,7 +66,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.search = (sec.integer("search_lines", s.search[0], ge=0, le=64), sec.integer("search_columns", s.search[1], ge=0, le=64))
     s.pilot_search = (sec.integer("pilot_search_lines", s.pilot_search[0], ge=0, le=64),
                       sec.integer("pilot_search_columns", s.pilot_search[1], ge=0, le=64))
-    s.match_method = sec.string("match_method", s.match_method, choices=("ncc", "phase"))
+    s.match_method = sec.string("match_method", s.match_method, choices=tuple(MATCHING_METHODS))
     s.min_quality = sec.number("min_quality", s.min_quality, ge=-1, le=1)
     s.axes = tuple(sec.strings("axes", list(s.axes), choices=AXES))
     if not s.axes:

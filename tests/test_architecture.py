@@ -91,3 +91,38 @@ def test_the_checks_see_a_cycle_and_an_upward_import(tmp_path):
     assert deps == {"restore", "restore.stages", "simsat.b"}
     assert sorted(_upward({"simsat.a": deps})) == ["simsat.a -> restore", "simsat.a -> restore.stages"]
     assert _cycles({"simsat.a": {"simsat.b"}, "simsat.b": {"simsat.a"}}) == [["simsat.a", "simsat.b", "simsat.a"]]
+def test_no_branching_on_method_names():
+    pattern = re.compile(r"method\s*==|method in \(")
+    found = [f"{p.relative_to(ROOT)}:{i}" for pkg in ("restore", "reports") for p in (ROOT / pkg).rglob("*.py")
+             for i, line in enumerate(p.read_text().splitlines(), 1) if pattern.search(line)]
+    assert not found, found
+
+
+def _code_lines(path: Path, fn: ast.FunctionDef) -> int:
+    """Lines of code of a function: its body without the docstring, blank lines and comments."""
+    body = fn.body
+    first = body[0]
+    has_doc = isinstance(first, ast.Expr) and isinstance(getattr(first, "value", None), ast.Constant) and \
+        isinstance(first.value.value, str)
+    start = (first.end_lineno + 1) if has_doc and len(body) > 1 else body[0].lineno
+    lines = path.read_text().splitlines()[start - 1:fn.end_lineno]
+    return sum(1 for ln in lines if ln.strip() and not ln.strip().startswith("#"))
+
+
+def test_no_function_over_80_lines_without_a_reason():
+    long = []
+    for pkg in LAYERS:
+        for p in (ROOT / pkg).rglob("*.py"):
+            for node in ast.walk(ast.parse(p.read_text())):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    n = _code_lines(p, node)
+                    if n > 80 and "Long:" not in (ast.get_docstring(node) or ""):
+                        long.append(f"{p.relative_to(ROOT)}:{node.lineno} {node.name} ({n} lines)")
+    assert not long, long
+
+
+def test_the_length_check_counts_code_not_docstrings(tmp_path):
+    p = tmp_path / "m.py"
+    p.write_text('def f():\n    """Doc.\n\n    More doc.\n    """\n    # a comment\n    x = 1\n\n    return x\n')
+    fn = ast.parse(p.read_text()).body[0]
+    assert _code_lines(p, fn) == 2
