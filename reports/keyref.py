@@ -123,7 +123,7 @@ MEANING = {
     "restoration.axes": "axes fitted by the instant synthesis",
     "restoration.n_sigma": "outlier rejection threshold [σ]",
     "restoration.min_points_per_line": "fewest points that make a line's differential",
-    "restoration.highpass_hz": "frequencies the AOCS already knows, removed from the estimate [Hz]",
+    "restoration.highpass_hz": "high-pass of the estimate [Hz]: \"auto\" = 0.2 × the AOCS knowledge cut-off recorded in product.nc (10 Hz → 2 Hz)",
     "restoration.max_gap_fill_lines": "longest run of lines filled from neighbours; longer gaps are NaN",
     "restoration.compensate_window": "undo the matching window's moving average on the differentials",
     "restoration.method": "integration method (default wiener); options in [restoration.integration]",

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import sys
 import time as _time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -65,6 +66,7 @@ class Restorer:
     def __init__(self, settings: RestorationSettings | None = None, *, progress: bool = False):
         self.settings = settings or RestorationSettings()
         self.progress = progress
+        self._given = self.settings
 
     def run(self, product: Product, *, run_dir: Path | None = None, corrected_path: Path | None = None,
             corrected_attrs: dict | None = None) -> RestorationResult:
@@ -74,7 +76,9 @@ class Restorer:
         by block (memory bounded by one band) and ``result.corrected`` is that
         file opened lazily; otherwise they are kept in memory.
         """
-        s = self.settings
+        # settings the product decides ("auto" high-pass from the AOCS knowledge's cut-off)
+        s = self.settings = replace(self._given, highpass_hz=stages.highpass_from_product(self._given.highpass_hz,
+                                                                                            product))
         t_all = _time.perf_counter()
         timings: dict = {}
         pairs_ab = stages.resolve_pairs(product, s)

@@ -28,7 +28,7 @@ class RestorationSettings:
     axes: tuple = ("roll", "pitch")
     n_sigma: float = 3.0
     min_points_per_line: int = 3
-    highpass_hz: float = 2.0
+    highpass_hz: float | str = "auto"
     max_gap_fill_lines: int = 8
     compensate_window: bool = True
     method: str | None = None
@@ -75,7 +75,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
         raise sec.error("axes", f"names an axis twice: {list(s.axes)}")
     s.n_sigma = sec.number("n_sigma", s.n_sigma, gt=0)
     s.min_points_per_line = sec.integer("min_points_per_line", s.min_points_per_line, ge=2)
-    s.highpass_hz = sec.number("highpass_hz", s.highpass_hz, ge=0)
+    s.highpass_hz = sec.number_or("highpass_hz", "auto", ge=0, le=1e4)
     s.max_gap_fill_lines = sec.integer("max_gap_fill_lines", s.max_gap_fill_lines, ge=0)
     s.compensate_window = sec.boolean("compensate_window", s.compensate_window)
     m = sec.raw("method", None)

@@ -297,6 +297,31 @@ def pair_differentials(pair: PairData, settings: RestorationSettings, n_lines: i
 
 
 # --------------------------------------------------------------------------- integrate
+#: "auto" high-pass: this fraction of the AOCS knowledge's cut-off (10 Hz knowledge → 2 Hz)
+HIGHPASS_FRACTION_OF_KNOWLEDGE = 0.2
+#: "auto" high-pass of a product that does not record its knowledge's cut-off [Hz]
+HIGHPASS_WITHOUT_KNOWLEDGE_SPEC_HZ = 2.0
+
+
+def highpass_from_product(setting, product: Product) -> float:
+    """The high-pass cut-off [Hz]: ``restoration.highpass_hz``, or with "auto" derived from the product.
+
+    The AOCS knowledge follows the attitude below its cut-off ``f_c``
+    (``knowledge_cutoff_hz`` in product.nc); the images must supply what lies
+    above. Differentials observe low frequencies badly (``|G| ≈ 2π f τ``), so
+    the estimate is high-passed at ``0.2 f_c``: every frequency the knowledge
+    misses is kept, and the band ``0.2 f_c … f_c`` is covered by both (the
+    differentials measure what the knowledge got wrong there, not the attitude
+    twice).
+    """
+    if setting != "auto":
+        return float(setting)
+    cutoff = product.ds.attrs.get("knowledge_cutoff_hz")
+    if cutoff is None:
+        return HIGHPASS_WITHOUT_KNOWLEDGE_SPEC_HZ
+    return HIGHPASS_FRACTION_OF_KNOWLEDGE * float(cutoff)
+
+
 def integrate_differentials(axis: str, used: list, differentials: list, previous: np.ndarray,
                             settings: RestorationSettings, line_period_s: float, *, where="") -> IntegrationRecord:
     """Integrate one axis's differentials of the pairs ``used`` (:func:`integrate_axis`), recorded."""

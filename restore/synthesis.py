@@ -106,8 +106,9 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
     k = len(idx)
     # scale unknowns to µrad-ish magnitude for conditioning
     scale = 1e-6
-    rows_l = s[:, 0, idx] * scale
-    rows_c = s[:, 1, idx] * scale
+    # rows of unusable points are zeroed: their weight is 0, and 0 × NaN would poison the line's sums
+    rows_l = np.where(ok[:, None], s[:, 0, idx], 0.0) * scale
+    rows_c = np.where(ok[:, None], s[:, 1, idx], 0.0) * scale
     inl = ok.copy()
     x = np.full((n_lines, k), np.nan)
     npts = np.zeros(n_lines, dtype=np.int64)
@@ -120,7 +121,7 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
         npts = np.bincount(li[inl], minlength=n_lines)
         x = _solve_lines(nm, rhs, npts >= min_points, n_lines, k)
         # residuals of every point against its line's fit
-        xp = x[lines]
+        xp = x[np.clip(lines, 0, n_lines - 1)]  # points off the record are not usable (ok is False)
         has = np.all(np.isfinite(xp), axis=1)
         el = rl - np.einsum("nk,nk->n", rows_l, np.nan_to_num(xp))
         ec = rc - np.einsum("nk,nk->n", rows_c, np.nan_to_num(xp))

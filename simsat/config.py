@@ -121,6 +121,19 @@ class Section:
         _check_bounds(self, name, value, gt, ge, lt, le)
         return value
 
+    def number_or(self, name: str, word: str, *, gt: float | None = None, ge: float | None = None,
+                  lt: float | None = None, le: float | None = None) -> float | str:
+        """A real number with optional bounds, or the word ``word`` (also the default, e.g. "auto")."""
+        value = self.data.get(name, word)
+        if value == word:
+            _record(self, name, f"number or \"{word}\"", word, gt=gt, ge=ge, lt=lt, le=le)
+            self._read.add(name)
+            return word
+        if isinstance(value, str):
+            self._read.add(name)
+            raise self.error(name, f"must be a number or \"{word}\", got string {value!r}")
+        return self.number(name, word, gt=gt, ge=ge, lt=lt, le=le)
+
     def integer(self, name: str, default: Any = REQUIRED, *, gt: int | None = None,
                 ge: int | None = None, lt: int | None = None, le: int | None = None) -> int:
         """An integer, with optional bounds."""

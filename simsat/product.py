@@ -230,8 +230,13 @@ class Product:
         return self.sensor_model().nominal_delay_s(ahead, behind)
 
 
-def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem):
+def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowledge_spec=None):
     """The ``product.nc`` dataset of scenario ``sc`` (the reader is :func:`read_product`).
+
+    ``knowledge_spec`` (cut-off, rate, noise of the AOCS knowledge, as a ground
+    segment knows its AOCS) is recorded in the attributes ``knowledge_cutoff_hz``,
+    ``knowledge_rate_hz``, ``knowledge_noise_urad``: restoration derives from it
+    which frequencies the images must supply.
 
     ``images``: band → (line, column) DN, or None (streamed in afterwards by
     the renderer); ``kn``/``st``: knowledge and star-tracker attitude series;
@@ -289,6 +294,9 @@ def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem):
         "pixel_ifov_rad": inst.ifov_rad(sc.acquisition.reference_detector),
         "mtf_nyquist": inst.mtf_nyquist, "bits": inst.radiometry.bits,
         "dem_dx_m": float(known_dem.dx_m), "dem_dy_m": float(known_dem.dy_m),
+        **({} if knowledge_spec is None else {"knowledge_cutoff_hz": float(knowledge_spec.cutoff_hz),
+                                              "knowledge_rate_hz": float(knowledge_spec.rate_hz),
+                                              "knowledge_noise_urad": float(knowledge_spec.noise_urad)}),
         "attitude_convention": "body->local R = Rz(yaw) Ry(pitch) Rx(roll); roll moves image across-track",
     }
     return xr.Dataset(data, coords=coords, attrs=attrs)

@@ -27,6 +27,25 @@ def test_synthesis_recovers_known_differentials_and_rejects_outliers():
     assert np.all(np.isnan(res.diff[:, 2]))  # yaw not fitted
 
 
+def test_unusable_points_are_left_out_not_fatal():
+    """A point with a NaN sensitivity, or on a line off the record, is dropped: the other lines are unchanged."""
+    rng = np.random.default_rng(1)
+    n_lines = 20
+    lines = np.repeat(np.arange(n_lines), 8)
+    s = np.zeros((lines.size, 2, 3))
+    s[:, 1, 0] = -2.48e5
+    s[:, 0, 1] = 2.48e5
+    rl = rng.normal(0, 0.05, lines.size)
+    rc = rng.normal(0, 0.05, lines.size)
+    ref = instant_synthesis(lines, rl, rc, s, n_lines=n_lines, axes=("roll", "pitch"))
+    s_bad = np.concatenate([s, np.full((1, 2, 3), np.nan), s[:1]])
+    lines_bad = np.concatenate([lines, [3], [n_lines + 5]])
+    res = instant_synthesis(lines_bad, np.append(rl, [0.0, 0.0]), np.append(rc, [0.0, 0.0]), s_bad, n_lines=n_lines,
+                            axes=("roll", "pitch"))
+    np.testing.assert_array_equal(res.diff, ref.diff)
+    assert not res.inlier[-2:].any()
+
+
 def test_lines_without_enough_points_are_gaps_not_zeros():
     lines = np.array([0, 0, 0, 0, 2, 2])
     s = np.zeros((6, 2, 3))

@@ -36,6 +36,17 @@ def test_run_directory_holds_product_truth_and_run_json(tiny_run):
     assert "mitsuba" in run["versions"] and run["timings"]["render_s"] > 0
 
 
+def test_product_records_what_the_aocs_knowledge_covers(tiny_run):
+    """A ground segment knows its AOCS: the knowledge's cut-off, rate and noise are in product.nc."""
+    from simsat.scenario import load_scenario
+
+    attrs = xr.load_dataset(tiny_run / "product.nc").attrs
+    spec = load_scenario("tiny").attitude_model().knowledge
+    assert attrs["knowledge_cutoff_hz"] == spec.cutoff_hz
+    assert attrs["knowledge_rate_hz"] == spec.rate_hz
+    assert attrs["knowledge_noise_urad"] == spec.noise_urad
+
+
 def test_same_scenario_and_seed_give_the_same_bytes(tiny_run, tmp_path):
     d2 = tmp_path / "again"
     simulate("tiny", d2, progress=False)
