@@ -60,7 +60,7 @@ MEANING = {
     "attitude.jitter[].axis": "axis or axes it moves (independent draws per axis)",
     "attitude.jitter[].frequency_hz": "frequency [Hz]",
     "attitude.jitter[].amplitude_urad": "amplitude [µrad] (cmg: of the main lines)",
-    "attitude.jitter[].phase_deg": "phase at the acquisition start [deg]",
+    "attitude.jitter[].phase_deg": "phase at the acquisition start [deg]; omitted: a random phase drawn for each axis",
     "attitude.jitter[].drift_percent": "frequency drift over the acquisition [%] (cmg: a [min, max] range)",
     "attitude.jitter[].drift_shape": "time shape of the drift",
     "attitude.jitter[].exciter_frequencies_hz": "fundamental frequency of each exciter (wheel, CMG) [Hz]",

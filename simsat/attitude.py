@@ -487,12 +487,18 @@ class PolynomialDrift(Disturbance):
 # ---------------------------------------------------------------------------
 # Config
 # ---------------------------------------------------------------------------
+def _phase_rad(sec: Section, rng: np.random.Generator) -> float:
+    """``phase_deg`` when given; else a random phase drawn for this axis (independent axes, not one sine twice)."""
+    deg = sec.number("phase_deg", None, ge=-1e6, le=1e6)
+    return math.radians(deg) if deg is not None else float(rng.uniform(0.0, 2.0 * np.pi))
+
+
 def _harmonic_from_config(sec: Section, *, rng: np.random.Generator, t_start: float, t_end: float) -> Disturbance:
     """``kind = "harmonic"``: one sine, optional slow frequency drift."""
     return HarmonicJitter(
         frequency_hz=sec.number("frequency_hz", gt=0, le=MAX_FREQUENCY_HZ),
         amplitude_rad=sec.number("amplitude_urad", ge=0, le=MAX_AMPLITUDE_URAD) * RAD_PER_URAD,
-        phase_rad=math.radians(sec.number("phase_deg", 0.0)),
+        phase_rad=_phase_rad(sec, rng),
         drift=sec.number("drift_percent", 0.0, gt=-100) / 100,
         drift_shape=sec.string("drift_shape", "linear", choices=_DRIFT_SHAPES),
         t0=t_start, t_end=t_end)

@@ -107,7 +107,7 @@ CMG = {"kind": "cmg", "axis": ["roll", "pitch"], "exciter_frequencies_hz": [52.0
 def test_model_from_config_axes_and_nominal():
     m = AttitudeModel.from_config(
         Section({"jitter": [CMG, {"kind": "harmonic", "axis": "yaw", "frequency_hz": 3,
-                                  "amplitude_urad": 2}]}, "attitude"),
+                                  "amplitude_urad": 2, "phase_deg": 0.0}]}, "attitude"),
         seed=1, nominal=(0.1, -0.2, 0.3), t_start=0.0, t_end=2.0)
     t = np.linspace(0, 2, 101)
     r, p, y = m.evaluate(t)
@@ -115,6 +115,26 @@ def test_model_from_config_axes_and_nominal():
     assert len(m.disturbances) == 3
     assert not np.allclose(r - 0.1, p + 0.2)          # independent draws per axis
     assert m.knowledge.cutoff_hz == 10.0 and not m.star_tracker.enabled
+
+
+def test_harmonic_on_several_axes_gets_an_independent_phase_per_axis_unless_given():
+    """One table on roll and pitch: two sines of the same frequency and amplitude, phases drawn per axis."""
+    t = np.linspace(0, 1, 2001)
+    tab = {"kind": "harmonic", "axis": ["roll", "pitch"], "frequency_hz": 7.0, "amplitude_urad": 3.0}
+    m = AttitudeModel.from_config(Section({"jitter": [tab]}, "attitude"), seed=4, nominal=(0, 0, 0),
+                                  t_start=0.0, t_end=1.0)
+    r, p, _ = m.evaluate(t)
+    phases = []
+    for x in (r, p):
+        c, s_ = (np.mean(x * f(2 * np.pi * 7.0 * t)) * 2 / (3.0 * URAD) for f in (np.sin, np.cos))
+        assert np.hypot(c, s_) == pytest.approx(1.0, rel=1e-3)   # same amplitude
+        phases.append(np.arctan2(s_, c))
+    assert abs(np.angle(np.exp(1j * (phases[0] - phases[1])))) > 0.05   # not the same sine twice
+    given = AttitudeModel.from_config(Section({"jitter": [{**tab, "phase_deg": 30.0}]}, "attitude"), seed=4,
+                                      nominal=(0, 0, 0), t_start=0.0, t_end=1.0)
+    r, p, _ = given.evaluate(t)
+    np.testing.assert_allclose(r, p, atol=1e-18)                 # a given phase is the same on every axis
+    np.testing.assert_allclose(r, 3.0 * URAD * np.sin(2 * np.pi * 7.0 * t + np.radians(30.0)), atol=1e-15)
 
 
 def test_same_seed_same_bytes_and_scalar_time():
@@ -189,7 +209,7 @@ def test_attitude_series_nan_samples():
 
 
 def test_aocs_knowledge_lowpass_zero_phase_and_noise():
-    m = _model([{"kind": "harmonic", "axis": "roll", "frequency_hz": 0.5, "amplitude_urad": 10},
+    m = _model([{"kind": "harmonic", "axis": "roll", "frequency_hz": 0.5, "amplitude_urad": 10, "phase_deg": 0.0},
                 {"kind": "harmonic", "axis": "pitch", "frequency_hz": 100, "amplitude_urad": 10},
                 {"kind": "harmonic", "axis": "roll", "frequency_hz": 80, "amplitude_urad": 4}],
                t_end=4.0)
