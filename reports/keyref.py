@@ -96,6 +96,7 @@ MEANING = {
     "scene.dem_knowledge.bias_m": "height bias of the known DEM [m]",
     "scene.dem_knowledge.correlation_m": "correlation length of the known DEM's error [m]",
     "scene.sun.elevation_deg": "sun elevation [deg]",
+    "scene.sun.irradiance_scale": "scene brightness: the sun's irradiance relative to the built-in scenes (0.2: five times less signal)",
     "scene.sun.azimuth_deg": "sun azimuth from +x (along track) toward +y [deg]",
     "scene.sun.ambient": "diffuse sky light as a fraction of the irradiance",
     "scene.sun.cast_shadows": "terrain casts shadows",

@@ -67,7 +67,7 @@ def build_world(sc: Scenario):
     sun = sc.sun()
     irr_z = terrain.sun_irradiance(dem, elevation_deg=sun.elevation_deg, azimuth_deg=sun.azimuth_deg,
                                    ambient=sun.ambient, shadows=sun.cast_shadows)
-    irr = terrain.Dem(x0_m=dem.x0_m, y0_m=dem.y0_m, dx_m=dem.dx_m, dy_m=dem.dy_m, z=irr_z)
+    irr = terrain.Dem(x0_m=dem.x0_m, y0_m=dem.y0_m, dx_m=dem.dx_m, dy_m=dem.dy_m, z=irr_z * sun.irradiance_scale)
     return model, dem, known, texture, irr
 
 
@@ -77,7 +77,7 @@ def make_renderer(sc, model, dem, texture, irr):
 
     sun = sc.sun()
     # cloud tops are lit like flat ground in the open (no relief shading, no cast shadow)
-    cloud_irr = sun.ambient + (1.0 - sun.ambient) * math.sin(math.radians(sun.elevation_deg))
+    cloud_irr = (sun.ambient + (1.0 - sun.ambient) * math.sin(math.radians(sun.elevation_deg))) * sun.irradiance_scale
     return PushbroomRenderer(platform=sc.platform, instrument=sc.instrument, dem=dem, texture=texture,
                              attitude=model.evaluate, irradiance=irr, cloud_irradiance=cloud_irr)
 

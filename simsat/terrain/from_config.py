@@ -208,7 +208,8 @@ def sun_from_config(section: Section) -> Sun:
     sun = Sun(elevation_deg=section.number("elevation_deg", 45.0, ge=1.0, le=90),  # below 1°: shadows unbounded
               azimuth_deg=section.number("azimuth_deg", 135.0, ge=-360, le=360),
               ambient=section.number("ambient", 0.2, ge=0, le=1),
-              cast_shadows=section.boolean("cast_shadows", True))
+              cast_shadows=section.boolean("cast_shadows", True),
+              irradiance_scale=section.number("irradiance_scale", 1.0, gt=0, le=10.0))
     section.finish()
     return sun
 

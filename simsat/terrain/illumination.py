@@ -46,15 +46,21 @@ class Sun:
         Fraction of the irradiance received by a surface in full shadow, in [0, 1].
     cast_shadows : bool
         Whether terrain casts shadows.
+    irradiance_scale : float
+        Scene brightness: the sun's irradiance relative to the reference scene
+        (1: the built-in scenarios; 0.2: a dim scene, five times less signal).
     """
 
     elevation_deg: float = 45.0
     azimuth_deg: float = 135.0
     ambient: float = 0.2
     cast_shadows: bool = True
+    irradiance_scale: float = 1.0
 
     def __post_init__(self):
         _check_sun(self.elevation_deg, self.azimuth_deg, self.ambient)
+        if not (math.isfinite(self.irradiance_scale) and self.irradiance_scale > 0):
+            raise ValueError(f"irradiance_scale: must be finite and > 0, got {self.irradiance_scale}")
 
     @property
     def direction(self) -> np.ndarray:

@@ -140,3 +140,16 @@ def test_radiometry_noise_does_not_depend_on_blocks():
     whole = apply_radiometry(rad, r, seed=7, band_index=2)
     parts = np.vstack([apply_radiometry(rad[a:a + 13], r, seed=7, band_index=2, first_line=a) for a in range(0, 40, 13)])
     np.testing.assert_array_equal(whole, parts)
+
+
+def test_scene_brightness_scales_the_signal(tiny_run, tmp_path):
+    """scene.sun.irradiance_scale = 0.5 halves the mean signal of every band (no saturation in tiny)."""
+    from simsat.scenario import load_scenario
+
+    dim = tmp_path / "dim"
+    simulate(load_scenario("tiny", overrides={"scene": {"sun": {"irradiance_scale": 0.5}}}), dim, progress=False)
+    a, b = xr.load_dataset(tiny_run / "product.nc"), xr.load_dataset(dim / "product.nc")
+    for band in ("B0", "B1", "B2", "B3"):
+        ref = a[f"image_{band}"].values.astype(float)
+        assert ref.max() < 4095
+        assert b[f"image_{band}"].values.mean() / ref.mean() == pytest.approx(0.5, rel=0.01)
