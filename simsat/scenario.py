@@ -23,6 +23,7 @@ from .attitude import AttitudeModel
 from .config import ScenarioError, Section
 from .instrument import Instrument, instrument_from_config
 from .platform import Platform, platform_from_config
+from .sensor_model import flat_ground_delay_s
 from .validation import run_table_checks
 
 if sys.version_info >= (3, 11):
@@ -84,11 +85,9 @@ class Scenario:
         return self.t0_s + np.arange(self.acquisition.lines) * self.line_period_s
 
     def delay_s(self, ahead: str, behind: str) -> float:
-        """Nominal delay τ [s] after which ``behind`` sees what ``ahead`` saw."""
-        a = self.instrument.detector(ahead)
-        b = self.instrument.detector(behind)
-        h, v, f = self.platform.altitude_m, self.platform.ground_speed_m_s, self.instrument.focal_length_m
-        return float(h * (a.along_m - b.along_m) / (f * v))
+        """Delay τ [s] after which ``behind`` sees what ``ahead`` saw, for the nominal viewing geometry
+        (off-nadir pointing included: :func:`simsat.sensor_model.flat_ground_delay_s`)."""
+        return flat_ground_delay_s(self.platform, self.instrument, ahead, behind)
 
     def section(self, name: str) -> Section:
         """The raw ``[name]`` table as a :class:`Section` (for later stages)."""

@@ -57,6 +57,26 @@ def los_body(focal_length_m: float, x_m, y_m) -> np.ndarray:
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
+def flat_ground_delay_s(platform, instrument, ahead, behind) -> float:
+    """Delay τ [s] after which detector ``behind`` sees what ``ahead`` saw, in the platform's nominal pointing.
+
+    Both lines of sight of the detectors' central pixels, rotated by the
+    nominal off-nadir roll and pitch, meet flat ground ``H`` below the
+    platform at along-track positions ``x = H d_x / (−d_z)``; the delay is their
+    distance over the ground speed. At nadir ``τ = H (a − b) / (f v)``; rolled
+    by φ the slant range grows and ``τ = H (a − b) / (f v cos φ)``.
+    """
+    r = rotation_matrices(platform.off_nadir_roll_rad, platform.off_nadir_pitch_rad, 0.0)
+    f = instrument.focal_length_m
+
+    def ground_x(det) -> float:
+        d = r @ los_body(f, det.along_m, det.focal_plane_y(0.5 * (det.pixels - 1)))
+        return platform.altitude_m * d[0] / -d[2]
+
+    return float((ground_x(instrument.detector(ahead)) - ground_x(instrument.detector(behind)))
+                 / platform.ground_speed_m_s)
+
+
 def constant_attitude(roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0) -> AttitudeFn:
     """An attitude callable returning constant angles [rad]."""
     def fn(t):
@@ -185,10 +205,9 @@ class SensorModel:
         return detector if isinstance(detector, Detector) else self.instrument.detector(detector)
 
     def nominal_delay_s(self, ahead, behind) -> float:
-        """Nominal delay τ [s] after which detector ``behind`` sees what ``ahead`` saw."""
-        a, b = self._det(ahead), self._det(behind)
-        h, v, f = self.platform.altitude_m, self.platform.ground_speed_m_s, self.instrument.focal_length_m
-        return float(h * (a.along_m - b.along_m) / (f * v))
+        """Nominal delay τ [s] after which detector ``behind`` sees what ``ahead`` saw (:func:`flat_ground_delay_s`)."""
+        self._det(ahead), self._det(behind)
+        return flat_ground_delay_s(self.platform, self.instrument, ahead, behind)
 
     # -- direct location -----------------------------------------------------
     def viewing_rays(self, detector, lines, columns, *, attitude: AttitudeFn | None = None):

@@ -126,3 +126,29 @@ def test_los_body_is_unit_and_points_down():
     d = los_body(F, np.array([0.001, 0.0]), np.array([0.0, 0.01]))
     assert np.allclose(np.linalg.norm(d, axis=-1), 1.0)
     assert np.all(d[:, 2] < 0)
+
+
+@pytest.mark.parametrize("roll_deg,pitch_deg", [(0.0, 0.0), (20.0, 0.0), (0.0, 10.0), (15.0, -5.0)])
+def test_delay_is_the_flat_plane_projection_of_the_viewing_geometry(roll_deg, pitch_deg):
+    """τ of the product/scenario = where band B's line meets the point band A saw, on a flat plane, off nadir too."""
+    from simsat.platform import Platform
+    from simsat.sensor_model import SensorModel, constant_attitude, flat_ground_delay_s
+    from support.geometry import F, H, TE, V, flat_dem, small_instrument
+
+    inst = small_instrument()
+    roll, pitch = np.radians(roll_deg), np.radians(pitch_deg)
+    n = 4000
+    along = np.mean([d.along_m for d in inst.detectors])
+    plat = Platform(altitude_m=H, ground_speed_m_s=V, off_nadir_roll_rad=roll,
+                    off_nadir_pitch_rad=pitch).centred(t_mid_s=0.5 * (n - 1) * TE, along_angle_rad=np.arctan(along / F))
+    sm = SensorModel(platform=plat, instrument=inst, dem=flat_dem(half_x=20000.0, half_y=5000.0),
+                     attitude=constant_attitude(roll, pitch))
+    centre = 0.5 * (inst.detectors[0].pixels - 1)
+    g = sm.direct_location("B1", np.array([n / 2]), np.array([centre]))
+    line_b, _ = sm.inverse_location("B0", g)
+    measured = float((line_b[0] - n / 2) * TE)
+    assert flat_ground_delay_s(plat, inst, "B1", "B0") == pytest.approx(measured, rel=1e-6)
+    assert sm.nominal_delay_s("B1", "B0") == pytest.approx(measured, rel=1e-6)
+    if pitch_deg == 0.0:   # rolled: the slant range grows by 1 / cos φ
+        nadir = H * 0.962e-3 / (F * V)
+        assert measured == pytest.approx(nadir / np.cos(roll), rel=1e-6)
