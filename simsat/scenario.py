@@ -66,6 +66,8 @@ class Scenario:
     x_range_m: tuple = (0.0, 0.0)
     y_range_m: tuple = (0.0, 0.0)
     requirement: dict = field(default_factory=dict)
+    #: the imaged ground (nominal geometry, without the scene margin) [m]
+    footprint_m: tuple = ((0.0, 0.0), (0.0, 0.0))
 
     # -- derived geometry ----------------------------------------------------
     @property
@@ -117,7 +119,7 @@ class Scenario:
         # synthesise only the bands the instrument has (texture synthesis is a large share of rendering)
         bands = {d.band for d in self.instrument.detectors}
         return terrain.texture_from_config(sec, base_dir=self.base_dir, seed=self.seed, sun=self.sun(),
-                                           default_bands=bands)
+                                           default_bands=bands, footprint_m=self.footprint_m)
 
     def sun(self):
         return terrain.sun_from_config(self.section("scene").section("sun"))
@@ -322,7 +324,8 @@ def _build(raw: dict, path: Path | None, base_dir: Path) -> Scenario:
     sc = Scenario(name=name, seed=seed, description=description, platform=platform, instrument=instrument,
                   acquisition=acquisition, raw=raw, source=path, base_dir=base_dir,
                   x_range_m=(float(xs.min() - margin), float(xs.max() + margin)),
-                  y_range_m=(float(min(ys) - margin), float(max(ys) + margin)), requirement=requirement)
+                  y_range_m=(float(min(ys) - margin), float(max(ys) + margin)), requirement=requirement,
+                  footprint_m=((float(xs.min()), float(xs.max())), (float(min(ys)), float(max(ys)))))
     run_table_checks(sc)  # the tables of later stages (restore registers [restoration])
     return sc
 

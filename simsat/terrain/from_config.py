@@ -215,7 +215,7 @@ def sun_from_config(section: Section) -> Sun:
 
 
 def texture_from_config(section: Section, *, base_dir, seed: int, sun: Sun | None = None,
-                        default_bands=None):
+                        default_bands=None, footprint_m=None):
     """Ground reflectance texture from ``[scene.texture]``.
 
     Parameters
@@ -231,6 +231,9 @@ def texture_from_config(section: Section, *, base_dir, seed: int, sun: Sun | Non
     default_bands : sequence of str, optional
         Bands to synthesise when the table has no ``bands`` key (e.g. the
         instrument's bands); default all of ``BAND_NAMES``.
+    footprint_m : ((x0, x1), (y0, y1)), optional
+        The imaged ground [m]: the procedural texture's cover fractions are
+        realised there.
 
     Returns
     -------
@@ -243,10 +246,11 @@ def texture_from_config(section: Section, *, base_dir, seed: int, sun: Sun | Non
         raise section.error("bands", f"repeated band in {list(bands)}")
     if bands is None and default_bands is not None:
         bands = tuple(b for b in BAND_NAMES if b in set(default_bands))
-    return TEXTURE_SOURCES[kind].from_config(section, base_dir=base_dir, seed=seed, sun=sun, bands=bands, texel=texel)
+    return TEXTURE_SOURCES[kind].from_config(section, base_dir=base_dir, seed=seed, sun=sun, bands=bands, texel=texel,
+                                             footprint_m=footprint_m)
 
 
-def _procedural_texture(section: Section, *, base_dir, seed: int, sun, bands, texel: float):
+def _procedural_texture(section: Section, *, base_dir, seed: int, sun, bands, texel: float, footprint_m=None):
     """``kind = "procedural"``: land classes, fields, towns, water and clouds synthesised from the seed."""
     sun = sun or Sun()
     kw = dict(
@@ -260,12 +264,13 @@ def _procedural_texture(section: Section, *, base_dir, seed: int, sun, bands, te
     section.finish()
     try:
         return ProceduralTexture(seed=seed, bands=BAND_NAMES if bands is None else bands, texel_m=texel,
-                                 sun_elevation_deg=sun.elevation_deg, sun_azimuth_deg=sun.azimuth_deg, **kw)
+                                 sun_elevation_deg=sun.elevation_deg, sun_azimuth_deg=sun.azimuth_deg,
+                                 calibration_extent_m=footprint_m, **kw)
     except ValueError as exc:
         raise _reraise(section, exc) from None
 
 
-def _ortho_texture(section: Section, *, base_dir, seed: int, sun, bands, texel: float):
+def _ortho_texture(section: Section, *, base_dir, seed: int, sun, bands, texel: float, footprint_m=None):
     """``kind = "orthoimage"``: an image file whose channels are mapped to bands."""
     path = _resolve(section, "path", base_dir)
     ch = section.section("channels", required=True)

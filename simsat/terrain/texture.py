@@ -208,6 +208,19 @@ class _Canvas:
     cls: np.ndarray
 
 
+def _check_extent(extent):
+    """``((x0, x1), (y0, y1))`` [m] with x0 < x1, y0 < y1, or None."""
+    if extent is None:
+        return None
+    try:
+        (x0, x1), (y0, y1) = ((float(a), float(b)) for a, b in extent)
+    except (TypeError, ValueError):
+        raise ValueError(f"calibration_extent_m: expected ((x0, x1), (y0, y1)) [m], got {extent!r}") from None
+    if not (np.isfinite([x0, x1, y0, y1]).all() and x0 < x1 and y0 < y1):
+        raise ValueError(f"calibration_extent_m: expected finite ranges with x0 < x1, y0 < y1, got {extent!r}")
+    return (x0, x1), (y0, y1)
+
+
 class ProceduralTexture:
     """Deterministic, tileable multi-band reflectance of a synthetic landscape.
 
@@ -248,12 +261,15 @@ class ProceduralTexture:
     def __init__(self, *, seed: int = 0, bands: Sequence[str] = BAND_NAMES, water_fraction: float = 0.05,
                  cloud_fraction: float = 0.0, urban_fraction: float = 0.08, forest_fraction: float = 0.25,
                  field_size_m: float = 200.0, sun_elevation_deg: float = 45.0, sun_azimuth_deg: float = 135.0,
-                 texel_m: float = 1.0, cloud_height_m: float = 1500.0, workers: int | None = None):
+                 texel_m: float = 1.0, cloud_height_m: float = 1500.0, workers: int | None = None,
+                 calibration_extent_m=None):
         self._init_kwargs = dict(seed=seed, bands=bands, water_fraction=water_fraction,
                                  cloud_fraction=cloud_fraction, urban_fraction=urban_fraction,
                                  forest_fraction=forest_fraction, field_size_m=field_size_m,
                                  sun_elevation_deg=sun_elevation_deg, sun_azimuth_deg=sun_azimuth_deg,
-                                 texel_m=texel_m, cloud_height_m=cloud_height_m, workers=workers)
+                                 texel_m=texel_m, cloud_height_m=cloud_height_m, workers=workers,
+                                 calibration_extent_m=calibration_extent_m)
+        self._extent = _check_extent(calibration_extent_m)
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise ValueError(f"seed: must be an integer, got {seed!r}")
         self.seed = int(seed)
@@ -362,7 +378,13 @@ class ProceduralTexture:
         return fn
 
     def _calibrate(self):
-        """Thresholds on the macro fields that give the requested area fractions."""
+        """Thresholds on the macro fields that give the requested area fractions.
+
+        Water and cloud fractions are realised over ``calibration_extent_m``
+        (the imaged footprint: the keys mean what lands in the image); urban and
+        forest fractions, and water and cloud without an extent, on average over
+        a 400 km square.
+        """
         rng = np.random.default_rng([self.seed & 0xFFFFFFFF, 7])
         n = 60000
         qx = quantise(rng.uniform(-2e5, 2e5, n))
@@ -372,9 +394,8 @@ class ProceduralTexture:
         nf = fbm_points(qx, qy, *_OCT_FOREST, self._salt[1])
         wf, uf, ff = self.water_fraction, self.urban_fraction, self.forest_fraction
         inf = np.float32(np.inf)
-        self._t_water = _F32(np.quantile(nw, wf)) if 0 < wf < 1 else (-inf if wf == 0 else inf)
-        land = nw >= self._t_water
-        self._t_shore = _F32(self._t_water + 0.03) if wf > 0 else -inf
+        t_water_wide = _F32(np.quantile(nw, wf)) if 0 < wf < 1 else (-inf if wf == 0 else inf)
+        land = nw >= t_water_wide
         if uf > 0 and land.any():
             q = 1 - min(1.0, uf / max(1e-9, 1 - wf))
             self._t_urban = _F32(np.quantile(nu[land], q)) if q > 0 else -inf
@@ -386,6 +407,14 @@ class ProceduralTexture:
             self._t_forest = _F32(np.quantile(nf[rest], q)) if q > 0 else -inf
         else:
             self._t_forest = inf
+        if self._extent is not None:  # water and cloud: what lands in the footprint
+            (x0, x1), (y0, y1) = self._extent
+            frng = np.random.default_rng([self.seed & 0xFFFFFFFF, 8])
+            qx = quantise(frng.uniform(x0, x1, n))
+            qy = quantise(frng.uniform(y0, y1, n))
+            nw = fbm_points(qx, qy, *_OCT_WATER, self._salt[0])
+        self._t_water = _F32(np.quantile(nw, wf)) if 0 < wf < 1 else (-inf if wf == 0 else inf)
+        self._t_shore = _F32(self._t_water + 0.03) if wf > 0 else -inf
         cf = self.cloud_fraction
         if cf > 0:
             nc = fbm_points(qx, qy, *_OCT_CLOUD, self._salt[3])

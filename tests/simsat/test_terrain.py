@@ -674,3 +674,19 @@ def test_terrain_shading_lights_the_ground_not_the_clouds():
     np.testing.assert_allclose(a[:, clear], plain[:, clear] * irr_a[clear], rtol=1e-4, atol=1e-6)
     with pytest.raises(ValueError, match="ground_irradiance"):
         tex.grid(0.0, 0.0, 2.0, nx, ny, ground_irradiance=irr_a[:10])
+
+
+@pytest.mark.parametrize("kind,fractions,code", [
+    ("cloud", dict(cloud_fraction=0.35, water_fraction=0.0), "CLOUD"),
+    ("water", dict(water_fraction=0.25), "WATER"),
+])
+def test_cover_fractions_are_realised_in_the_imaged_footprint(kind, fractions, code):
+    """A requested 35 % cloud / 25 % water lands in the footprint (± 5 points), seed after seed."""
+    from simsat.terrain.texture import LandCover, ProceduralTexture
+
+    (x0, x1), (y0, y1) = extent = ((-5695.0, 5695.0), (-1119.0, 1119.0))   # phr_cmg's footprint
+    want = fractions[f"{kind}_fraction"]
+    for seed in range(5):
+        tx = ProceduralTexture(seed=seed, calibration_extent_m=extent, workers=1, **fractions)
+        cls = tx.land_cover_grid(x0, y0, 40.0, int((x1 - x0) / 40), int((y1 - y0) / 40))
+        assert np.mean(cls == getattr(LandCover, code)) == pytest.approx(want, abs=0.05), seed
