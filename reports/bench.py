@@ -18,8 +18,9 @@ from reports.metrics import (
     misregistration_floor,
 )
 from restore.pipeline import restore_run
+from restore.restoration_io import read_restoration
 from simsat.product import atomic_write_json, read_product, read_truth
-from simsat.scenario import load_scenario
+from simsat.scenario import SCENARIO_DIR, load_scenario
 from simsat.simulate import build_world, make_renderer, simulate
 
 #: where the benches write their scratch runs (rendered products they restore and score)
@@ -261,6 +262,8 @@ def run_bench(what: str, *, scenario: str | None = None, out: str | None = None,
         result = bench_integration.bench_integration(seed=seed)
     elif what == "memory":
         result = bench_memory(scenario=scenario, lines=lines)
+    elif what == "robustness":
+        result = bench_robustness(lines=lines)
     else:
         raise ValueError(f"what: unknown benchmark {what!r}")
     result = {"benchmark": what, "result": result, "wall_s": _time.perf_counter() - t0,
@@ -320,9 +323,55 @@ def _format_scaling(s: dict) -> list:
     return out
 
 
+def stress_scenarios() -> dict:
+    """Name → path of the stress suite (``scenarios/stress/*.toml``): one condition each, unseen by tuning."""
+    return {p.stem: p for p in sorted((SCENARIO_DIR / "stress").glob("*.toml"))}
+
+
+def bench_robustness(*, lines: int | None = None) -> dict:
+    """Render, restore and score every scenario of the stress suite (a failing one is recorded, not fatal).
+
+    Per scenario: RMS and 99.7 % per restored axis [px], the AOCS knowledge's
+    RMS, coverage, the scenario's requirement and its verdict.
+    """
+    rows = []
+    for name, path in stress_scenarios().items():
+        row = {"scenario": name, "file": str(path)}
+        try:
+            e = bench_end_to_end(scenario=str(path), lines=lines, tag="stress")
+            req = load_scenario(str(path)).requirement.get("max_rms_px") or 0.05
+            axes = list(read_restoration(Path(e["run_dir"]) / "restoration.nc").settings.axes)
+            row.update(errors={a: e["errors"][a] for a in axes}, coverage=e["coverage"], restore_s=e["restore_s"],
+                       requirement_rms_px=req, passed=all(e["errors"][a]["rms_px"] <= req for a in axes))
+        except Exception as ex:  # one scenario failing must not sink the suite: say why in its row
+            row["error"] = f"{type(ex).__name__}: {ex}"
+        rows.append(row)
+    return {"rows": rows, "lines": lines}
+
+
+def _format_robustness(r: dict) -> list:
+    out = [f"stress suite ({len(r['rows'])} scenarios{', ' + str(r['lines']) + ' lines' if r['lines'] else ''})",
+           f"  {'scenario':24s} {'roll RMS':>9s} {'p99.7':>7s} {'pitch RMS':>10s} {'p99.7':>7s} {'AOCS RMS':>9s} "
+           f"{'coverage':>9s}  verdict"]
+    for row in r["rows"]:
+        if "error" in row:
+            out.append(f"  {row['scenario']:24s} failed: {row['error'][:200]}")
+            continue
+        e = row["errors"]
+        cells = "".join(f" {e[a]['rms_px']:9.4f} {e[a]['p997_px']:7.3f}" if a in e else f" {'—':>9s} {'—':>7s}"
+                        for a in ("roll", "pitch"))
+        aocs = max(e[a]["knowledge_rms_px"] for a in ("roll", "pitch") if a in e)
+        cov = min(row["coverage"][a] for a in ("roll", "pitch"))
+        verdict = "PASS" if row["passed"] else f"FAIL (> {row['requirement_rms_px']} px)"
+        out.append(f"  {row['scenario']:24s}{cells}  {aocs:8.3f} {cov * 100:8.1f}%  {verdict}")
+    return out
+
+
 def format_result(what: str, result: dict) -> str:
     r = result["result"]
     lines = []
+    if what == "robustness":
+        return "\n".join(_format_robustness(r))
     if what == "memory":
         lines.append(f"peak RSS per process, {r['scenario']} ({r['cpu_count']} cores; scratch runs in {r['scratch']})")
         lines.append(f"  {'lines':>7s}  {'render':>16s}  {'restore':>16s}  {'report':>16s}")

@@ -239,6 +239,12 @@ def scenario_key_reference() -> str:
             meaning = MEANING.get(k, "")
             lines.append(f"| `{name}` | {kind} | {_fmt_default(default, req)} | {_fmt_range(cons)} | {meaning} |")
         lines.append("")
+    lines += ["## Deriving a scenario from another: `[scenario] base`", "",
+              "`base = \"phr_cmg\"` (a built-in name, or a path relative to the file) starts from that "
+              "scenario: its tables are overlaid key by key by this file's; a table naming another `kind` "
+              "(e.g. `[scene.dem] kind = \"matplotlib_sample\"`) and every array "
+              "(`[[attitude.jitter]]`) replace the base's; the base's `[scenario.requirement]` is not "
+              "inherited. The stress suite `scenarios/stress/*.toml` is written this way.", ""]
     lines += ["## `[scene.dem]` and `[scene.texture]` from files", "",
               "`[scene.dem] kind = \"geotiff\"` reads `path` (a GeoTIFF, relative to the scenario's folder) "
               "and `nodata`; it is re-centred on the scene and resampled to `resolution_m` when given. "

@@ -230,7 +230,7 @@ def load_scenario(source: str | Path | dict, *, overrides: dict | None = None, c
         base_dir = Path.cwd()
     else:
         path = find_scenario(source)
-        raw = _read_toml(path)
+        raw = _with_base(_read_toml(path), path)
         base_dir = path.resolve().parent
     if overrides:
         try:
@@ -246,6 +246,44 @@ def load_scenario(source: str | Path | dict, *, overrides: dict | None = None, c
             raise ScenarioError(f"{path}: {e}") from None
         raise
     return sc
+
+
+def _with_base(raw: dict, path: Path, seen: tuple = ()) -> dict:
+    """The scenario with ``[scenario] base`` resolved: the base's tables, overlaid by this file's.
+
+    ``base`` is a built-in scenario's name or a path relative to this file.
+    Tables merge key by key, except that a table naming another ``kind``
+    replaces the base's; any other value, arrays of tables included
+    (``[[attitude.jitter]]``), replaces the base's. Bases may have bases.
+    """
+    meta = raw.get("scenario")
+    if not isinstance(meta, dict) or "base" not in meta:
+        return raw
+    base = meta.pop("base")
+    if not isinstance(base, str) or not base:
+        raise ScenarioError(f"{path}: scenario.base: must be a scenario name or a path, got {base!r}")
+    p = Path(base)
+    base_path = find_scenario(base) if (p.suffix != ".toml" and len(p.parts) == 1) else \
+        find_scenario(str(path.resolve().parent / p))
+    key = base_path.resolve()
+    if key in seen or key == path.resolve():
+        raise ScenarioError(f"{path}: scenario.base: {base!r} leads back to itself")
+    if len(seen) >= 8:
+        raise ScenarioError(f"{path}: scenario.base: more than 8 levels of bases")
+    merged = _with_base(_read_toml(base_path), base_path, seen + (path.resolve(),))
+    merged.get("scenario", {}).pop("requirement", None)  # a derived scenario states its own requirement
+    _overlay(merged, raw)
+    return merged
+
+
+def _overlay(base: dict, over: dict) -> None:
+    """Tables merge key by key (a table of another ``kind`` replaces the base's); every other value replaces it."""
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(base.get(k), dict) and v.get("kind", base[k].get("kind")) == \
+                base[k].get("kind"):
+            _overlay(base[k], v)
+        else:
+            base[k] = copy.deepcopy(v)
 
 
 def _merge(base: dict | list, over: dict, where: str = "") -> None:

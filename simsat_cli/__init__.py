@@ -270,7 +270,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_figures)
 
     s = sub.add_parser("bench", help="benchmarks (results printed and written as JSON)")
-    s.add_argument("what", choices=["render", "restore", "matching", "integration", "memory"],
+    s.add_argument("what", choices=["render", "restore", "matching", "integration", "memory", "robustness"],
                    help="what to measure (memory: peak RSS of render, restore and report at 4 000, 16 000 and "
                         "50 000 lines, each in its own process)")
     s.add_argument("--scenario", default=None, help="scenario (render/restore; default phr_cmg)")

@@ -119,3 +119,40 @@ def test_cli_validate_reports_one_line_without_traceback(tmp_path):
     ok = subprocess.run([sys.executable, "-m", "simsat_cli", "validate", "tiny"], capture_output=True, text=True)
     assert ok.returncode == 0, ok.stderr
     assert "OK" in ok.stdout
+
+
+def test_a_scenario_can_derive_from_a_base(tmp_path):
+    """[scenario] base: the base's tables overlaid key by key; arrays and tables of another kind replace."""
+    from simsat.scenario import load_scenario
+
+    (tmp_path / "d.toml").write_text('[scenario]\nbase = "tiny"\nname = "derived"\n\n[scene.sun]\nirradiance_scale = 0.5\n'
+                                     '\n[scene.dem]\nkind = "matplotlib_sample"\n\n[[attitude.jitter]]\nkind = "harmonic"\n'
+                                     'axis = "roll"\nfrequency_hz = 3.0\namplitude_urad = 1.0\n')
+    sc = load_scenario(tmp_path / "d.toml")
+    base = load_scenario("tiny")
+    assert sc.name == "derived" and sc.seed == base.seed
+    assert sc.sun().irradiance_scale == 0.5 and sc.sun().elevation_deg == base.sun().elevation_deg
+    assert sc.raw["scene"]["dem"] == {"kind": "matplotlib_sample"}            # another kind: replaced
+    assert [j["kind"] for j in sc.raw["attitude"]["jitter"]] == ["harmonic"]  # arrays replace
+    assert sc.requirement.get("max_rms_px") is None                           # a requirement is not inherited
+    assert sc.instrument == base.instrument
+
+
+def test_a_base_that_leads_back_to_itself_is_refused(tmp_path):
+    from simsat.scenario import load_scenario
+
+    (tmp_path / "a.toml").write_text('[scenario]\nbase = "b.toml"\n')
+    (tmp_path / "b.toml").write_text('[scenario]\nbase = "a.toml"\n')
+    with pytest.raises(ScenarioError, match="leads back to itself"):
+        load_scenario(tmp_path / "a.toml")
+
+
+def test_every_stress_scenario_validates():
+    from reports.bench import stress_scenarios
+    from simsat.scenario import load_scenario
+
+    suite = stress_scenarios()
+    assert len(suite) >= 8
+    for name, path in suite.items():
+        sc = load_scenario(path)
+        assert sc.name == f"stress_{name}" and sc.requirement["max_rms_px"] == 0.05
