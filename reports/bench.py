@@ -340,9 +340,13 @@ def bench_robustness(*, lines: int | None = None) -> dict:
         try:
             e = bench_end_to_end(scenario=str(path), lines=lines, tag="stress")
             req = load_scenario(str(path)).requirement.get("max_rms_px") or 0.05
-            axes = list(read_restoration(Path(e["run_dir"]) / "restoration.nc").settings.axes)
+            res = read_restoration(Path(e["run_dir"]) / "restoration.nc")
+            axes = list(res.settings.axes)
+            px = res.pixel_ifov_rad
             row.update(errors={a: e["errors"][a] for a in axes}, coverage=e["coverage"], restore_s=e["restore_s"],
-                       requirement_rms_px=req, passed=all(e["errors"][a]["rms_px"] <= req for a in axes))
+                       requirement_rms_px=req, passed=all(e["errors"][a]["rms_px"] <= req for a in axes),
+                       unobservable_rms_px={a: res.integration[a].unobservable_rms_rad / px for a in axes},
+                       floor_rms_px={a: res.integration[a].floor_rms_rad / px for a in axes})
         except Exception as ex:  # one scenario failing must not sink the suite: say why in its row
             row["error"] = f"{type(ex).__name__}: {ex}"
         rows.append(row)
@@ -352,7 +356,7 @@ def bench_robustness(*, lines: int | None = None) -> dict:
 def _format_robustness(r: dict) -> list:
     out = [f"stress suite ({len(r['rows'])} scenarios{', ' + str(r['lines']) + ' lines' if r['lines'] else ''})",
            f"  {'scenario':24s} {'roll RMS':>9s} {'p99.7':>7s} {'pitch RMS':>10s} {'p99.7':>7s} {'AOCS RMS':>9s} "
-           f"{'coverage':>9s}  verdict"]
+           f"{'coverage':>9s} {'unobservable':>13s} {'floor':>12s}  verdict"]
     for row in r["rows"]:
         if "error" in row:
             out.append(f"  {row['scenario']:24s} failed: {row['error'][:200]}")
@@ -363,7 +367,9 @@ def _format_robustness(r: dict) -> list:
         aocs = max(e[a]["knowledge_rms_px"] for a in ("roll", "pitch") if a in e)
         cov = min(row["coverage"][a] for a in ("roll", "pitch"))
         verdict = "PASS" if row["passed"] else f"FAIL (> {row['requirement_rms_px']} px)"
-        out.append(f"  {row['scenario']:24s}{cells}  {aocs:8.3f} {cov * 100:8.1f}%  {verdict}")
+        uo = "/".join(f"{row['unobservable_rms_px'][a]:.3f}" for a in ("roll", "pitch") if a in row["unobservable_rms_px"])
+        fl = "/".join(f"{row['floor_rms_px'][a]:.3f}" for a in ("roll", "pitch") if a in row["floor_rms_px"])
+        out.append(f"  {row['scenario']:24s}{cells}  {aocs:8.3f} {cov * 100:8.1f}% {uo:>13s} {fl:>12s}  {verdict}")
     return out
 
 

@@ -210,7 +210,9 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
              "misregistration": json.dumps(res.misregistration, sort_keys=True),
              "anchored_on_star_tracker": int(res.anchored),
              "integration": json.dumps({a: {"pairs": rec.pairs, "method": rec.method, "options": rec.options,
-                                            "highpass_hz": rec.highpass_hz, "line_period_s": rec.line_period_s}
+                                            "highpass_hz": rec.highpass_hz, "line_period_s": rec.line_period_s,
+                                            "unobservable_rms_rad": rec.unobservable_rms_rad,
+                                            "floor_rms_rad": rec.floor_rms_rad}
                                         for a, rec in res.integration.items()}, sort_keys=True)}
     for a in AXES:
         attrs[f"coverage_{a}"] = res.coverage[a]
@@ -262,7 +264,9 @@ def _records_from(ds, info: dict) -> dict:
             lags_s=_values(ds, f"line_lag_{a}")[idx], weights=_values(ds, f"line_weight_{a}")[idx],
             line_period_s=float(meta["line_period_s"]), method=str(meta["method"]), options=dict(meta["options"]),
             highpass_hz=float(meta["highpass_hz"]), spectrum=spec, increment=_values(ds, f"increment_{a}"),
-            previous=_values(ds, f"previous_estimate_{a}"))
+            previous=_values(ds, f"previous_estimate_{a}"),
+            unobservable_rms_rad=float(meta.get("unobservable_rms_rad", float("nan"))),
+            floor_rms_rad=float(meta.get("floor_rms_rad", float("nan"))))
     return out
 
 

@@ -73,6 +73,8 @@ class IntegrationRecord:
     spectrum: PriorSpectrum | None
     increment: np.ndarray
     previous: np.ndarray
+    unobservable_rms_rad: float = float("nan")
+    floor_rms_rad: float = float("nan")
 
     def rerun(self, diffs=None, *, frozen: bool = True) -> np.ndarray:
         """Integrate other differentials (true ones, noisy ones) through this axis's integration.

@@ -17,7 +17,9 @@ from simsat.product import Product
 from .axis_integration import integrate_axis
 from .correction import correct_bands, line_median, misregistration, rank_within_line
 from .errors import RestorationError
+from .integration.wiener import spectrum_for_lines
 from .matching import match_points, support_margin
+from .observability import observability
 from .result import IntegrationRecord, PairData
 from .selection import select_points_in_blocks
 from .settings import RestorationSettings
@@ -340,11 +342,14 @@ def integrate_differentials(axis: str, used: list, differentials: list, previous
     weights = [d.weight for d in differentials]
     res = integrate_axis(diffs, taus, line_period_s, method=settings.method, options=settings.integration_options,
                          lags=lags, sigmas=sigmas, weights=weights, highpass_hz=settings.highpass_hz)
+    prior = res.spectrum or spectrum_for_lines(diffs, taus, line_period_s)
+    obs = observability(prior.freq, prior.psd, prior.noise_std, taus, line_period_s, highpass_hz=settings.highpass_hz)
     return IntegrationRecord(axis=axis, pairs=[p.name for p in used], diffs=np.array(diffs), sigmas=np.array(sigmas),
                              taus=np.array(taus), lags_s=np.array(lags), weights=np.array(weights),
                              line_period_s=line_period_s, method=res.method.name, options=res.options,
                              highpass_hz=settings.highpass_hz, spectrum=res.spectrum, increment=res.theta,
-                             previous=np.nan_to_num(previous))
+                             previous=np.nan_to_num(previous), unobservable_rms_rad=obs.unobservable_rms_rad,
+                             floor_rms_rad=obs.floor_rms_rad)
 
 
 # --------------------------------------------------------------------------- anchor

@@ -9,10 +9,13 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from reports.metrics import error_stats
+from restore.integration.wiener import spectrum_for_lines
+from restore.observability import observability
 from simsat.units import AXES
 
 from .headline import attitude_table, restored_axes
 from .loading import RunData
+from .series import longest_finite_run
 
 __all__ = ['integration_record', 'line_lags', 'true_differentials', 'measured_differentials', 'axis_integration', 'error_budget', 'BUDGET_COMPONENTS']
 
@@ -159,7 +162,8 @@ def _quad_row(component: str, axis: str, total: dict, part: dict, note: str) -> 
     return row
 
 
-BUDGET_COMPONENTS = ("uncorrected knowledge", "matching noise", "model / synthesis", "measurement (noise + model)",
+BUDGET_COMPONENTS = ("uncorrected knowledge", "unobservable (no pair sees it)", "floor (best linear restoration)",
+                     "matching noise", "model / synthesis", "measurement (noise + model)",
                      "integration", "total (restored − true)")
 
 
@@ -345,6 +349,7 @@ class _AxisBudget:
         if have_truth:
             rows.append(_stats_row("uncorrected knowledge", a, np.where(mask, att[f"knowledge_{a}"] - att[f"true_{a}"],
                                                                         np.nan), ifov))
+        rows += self.observability_rows()
         if rec is None or not have_truth:
             if have_truth:
                 rows.append(_stats_row("total (restored − true)", a, att[f"restored_{a}"] - att[f"true_{a}"], ifov))
@@ -374,5 +379,45 @@ class _AxisBudget:
         rows.append(r_meas)
         rows.append(_stats_row("integration", a, eint, ifov, "integrate(true differentials) − truth"))
         rows.append(_stats_row("total (restored − true)", a, total, ifov, "= measurement + integration"))
+        rows += self.band_split_rows(total)
         ser.update({"measurement": emeas, "integration": eint, "total": total})
         return rows
+
+    def observability_rows(self) -> list:
+        """What no method recovers with these pairs, and the best linear restoration's error, from the product."""
+        rec = axis_integration(self.run, self.a)["record"]
+        out = []
+        if rec is None or not np.isfinite(rec.floor_rms_rad):
+            return out
+        for comp, v, note in (("unobservable (no pair sees it)", rec.unobservable_rms_rad,
+                               "attitude power where the pairs' fused SNR < 1, predicted from the product"),
+                              ("floor (best linear restoration)", rec.floor_rms_rad,
+                               "Wiener / Cramér-Rao error with the estimated prior and noise")):
+            out.append({"axis": self.a, "component": comp, "rms_px": v / self.ifov, "p997_px": float("nan"),
+                        "rms_urad": v * 1e6, "p997_urad": float("nan"), "n": 0, "note": note})
+        return out
+
+    def band_split_rows(self, total) -> list:
+        """With truth: the measured total error inside and outside the unobservable band (its spectrum split)."""
+        rec = axis_integration(self.run, self.a)["record"]
+        if rec is None:
+            return []
+        prior = rec.spectrum or spectrum_for_lines(list(rec.diffs), list(rec.taus), rec.line_period_s)
+        obs = observability(prior.freq, prior.psd, prior.noise_std, rec.taus, rec.line_period_s,
+                            highpass_hz=rec.highpass_hz)
+        sl = longest_finite_run(total)
+        e = total[sl] - np.mean(total[sl])
+        if e.size < 16:
+            return []
+        spec = np.abs(np.fft.rfft(e)) ** 2
+        f = np.fft.rfftfreq(e.size, rec.line_period_s)
+        inside = np.interp(f, obs.freq, obs.unobservable_band.astype(float)) >= 0.5
+        frac = float(spec[inside].sum() / max(spec.sum(), 1e-300))
+        rms = float(np.sqrt(np.mean(e ** 2)))
+        out = []
+        for comp, v in (("total, in the unobservable band", rms * np.sqrt(frac)),
+                        ("total, outside it", rms * np.sqrt(1.0 - frac))):
+            out.append({"axis": self.a, "component": comp, "rms_px": v / self.ifov, "p997_px": float("nan"),
+                        "rms_urad": v * 1e6, "p997_urad": float("nan"), "n": int(e.size),
+                        "note": "share of the total error's spectrum in / out of the band"})
+        return out

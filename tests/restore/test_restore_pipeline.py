@@ -279,6 +279,8 @@ def test_restoration_round_trips_through_its_file(tiny_restored):
             np.testing.assert_array_equal(getattr(got, k), getattr(rec, k), err_msg=f"{a}.{k}")
         assert (got.pairs, got.method, got.options, got.highpass_hz, got.line_period_s) == \
             (rec.pairs, rec.method, rec.options, rec.highpass_hz, rec.line_period_s)
+        assert (got.unobservable_rms_rad, got.floor_rms_rad) == (rec.unobservable_rms_rad, rec.floor_rms_rad)
+        assert 0 <= rec.unobservable_rms_rad <= rec.floor_rms_rad + rec.unobservable_rms_rad and rec.floor_rms_rad > 0
         for k in ("freq", "psd", "noise_std"):  # the prior wiener estimated from the data
             np.testing.assert_array_equal(getattr(got.spectrum, k), getattr(rec.spectrum, k))
 

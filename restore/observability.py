@@ -1,0 +1,93 @@
+"""What the images can and cannot restore, from the pairs, the sampling and the estimated spectra alone.
+
+A pair of delay τ_j sees the attitude through ``G_j(f) = e^{2πifτ_j} − 1``:
+blind at ``f = k/τ_j``. With a prior PSD ``S(f)`` of the attitude (two-sided,
+rad²/Hz) and white differential noise of σ_j per line (PSD ``N_j = σ_j² Δt``),
+the fused signal-to-noise ratio at ``f`` is
+
+    SNR(f) = Σ_j |G_j(f)|² S(f) / N_j
+
+and the least mean-square error any linear estimator can reach (the Wiener
+filter; for a Gaussian prior the Bayesian Cramér–Rao bound) has the PSD
+
+    E(f) = S(f) / (1 + SNR(f)).
+
+Two figures per axis, over the frequencies the images must supply (above the
+estimate's high-pass; below, the AOCS knowledge answers):
+
+* **unobservable** — the attitude power where ``SNR < 1``: near the
+  frequencies where every pair is blind no method gets more than half of it
+  back; it is physics (the τ set), not the algorithm;
+* **floor** — ``√(2 ∫ E df)``: the error of the best linear restoration with
+  these pairs, this prior and this noise.
+
+The prior is what the restoration estimated from the differentials (the
+Wiener method reports it); near common blind frequencies it is an
+extrapolation by construction, which these figures inherit.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Observability", "fused_snr", "observability", "band_power"]
+
+
+@dataclass
+class Observability:
+    """Per axis: the frequency grid, the fused SNR, and the unobservable and floor RMS [rad]."""
+
+    freq: np.ndarray
+    snr: np.ndarray
+    unobservable_band: np.ndarray
+    unobservable_rms_rad: float
+    floor_rms_rad: float
+
+
+def fused_snr(freq, psd, noise_std, taus, dt: float) -> np.ndarray:
+    """``Σ_j |G_j(f)|² S(f) / (σ_j² Δt)`` on ``freq`` [Hz] (``psd`` two-sided [rad²/Hz], σ_j [rad/line])."""
+    f = np.asarray(freq, dtype=np.float64)
+    s = np.asarray(psd, dtype=np.float64)
+    sig = np.broadcast_to(np.asarray(noise_std, dtype=np.float64), (len(taus),))
+    acc = np.zeros(f.shape)
+    for tau, sj in zip(taus, sig):
+        g2 = 2.0 * (1.0 - np.cos(2.0 * np.pi * f * tau))
+        acc += g2 * s / max(sj * sj * dt, 1e-300)
+    return acc
+
+
+def band_power(freq, psd, mask) -> float:
+    """``2 ∫ S df`` over the one-sided grid ``freq`` where ``mask`` holds (two-sided PSD → variance)."""
+    f = np.asarray(freq, dtype=np.float64)
+    df = float(np.median(np.diff(f))) if f.size > 1 else 0.0
+    return float(2.0 * np.sum(np.where(mask, psd, 0.0)) * df)
+
+
+def observability(freq, psd, noise_std, taus, dt: float, *, highpass_hz: float = 0.0) -> Observability:
+    """Unobservable power and Wiener floor of one axis (see the module's docstring).
+
+    Parameters
+    ----------
+    freq : ndarray
+        One-sided frequency grid [Hz], uniform.
+    psd : ndarray
+        Prior PSD of the attitude on ``freq`` (two-sided) [rad²/Hz].
+    noise_std : float or ndarray (pairs,)
+        White noise of each pair's differentials [rad per line].
+    taus : sequence of float
+        Pair delays [s].
+    dt : float
+        Line period [s].
+    highpass_hz : float
+        Frequencies below are the AOCS knowledge's, not the images'.
+    """
+    f = np.asarray(freq, dtype=np.float64)
+    s = np.asarray(psd, dtype=np.float64)
+    snr = fused_snr(f, s, noise_std, taus, dt)
+    images = f >= highpass_hz
+    band = images & (snr < 1.0)
+    err = s / (1.0 + snr)
+    return Observability(freq=f, snr=snr, unobservable_band=band,
+                         unobservable_rms_rad=float(np.sqrt(band_power(f, s, band))),
+                         floor_rms_rad=float(np.sqrt(band_power(f, err, images))))
