@@ -31,6 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .integration.transfer import fused_snr
+
 __all__ = ["Observability", "fused_snr", "observability", "band_power"]
 
 
@@ -43,18 +45,6 @@ class Observability:
     unobservable_band: np.ndarray
     unobservable_rms_rad: float
     floor_rms_rad: float
-
-
-def fused_snr(freq, psd, noise_std, taus, dt: float) -> np.ndarray:
-    """``Σ_j |G_j(f)|² S(f) / (σ_j² Δt)`` on ``freq`` [Hz] (``psd`` two-sided [rad²/Hz], σ_j [rad/line])."""
-    f = np.asarray(freq, dtype=np.float64)
-    s = np.asarray(psd, dtype=np.float64)
-    sig = np.broadcast_to(np.asarray(noise_std, dtype=np.float64), (len(taus),))
-    acc = np.zeros(f.shape)
-    for tau, sj in zip(taus, sig):
-        g2 = 2.0 * (1.0 - np.cos(2.0 * np.pi * f * tau))
-        acc += g2 * s / max(sj * sj * dt, 1e-300)
-    return acc
 
 
 def band_power(freq, psd, mask) -> float:

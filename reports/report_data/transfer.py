@@ -8,7 +8,7 @@ import numpy as np
 from scipy.signal import csd, get_window, welch
 
 from restore.integration.methods import integration_method
-from restore.integration.transfer import chain_gain, fused_chain_gain
+from restore.integration.transfer import chain_gain, fused_chain_gain, fused_snr
 from simsat.units import AXES
 
 from .budget import axis_integration
@@ -123,15 +123,13 @@ def _options_for_pairs(options: dict, idx: Sequence[int], n_pairs: int) -> dict:
 def frozen_chain_gain(freq_hz, taus: Sequence[float], spectrum: dict, te: float) -> np.ndarray:
     """Analytic chain gain of the multi-pair Wiener filter with a frozen prior.
 
-    ``F = Σ_j |G_j|² S/N_j / (1 + Σ_j |G_j|² S/N_j)``, ``G_j = e^{jωτ_j} − 1``,
-    ``S`` the (two-sided) PSD prior of θ and ``N_j = σ_j² Δt`` the PSD of the
-    white noise of pair j (std ``σ_j`` per sample):
-    :func:`restore.integration.transfer.fused_chain_gain`.
+    ``F = SNR / (1 + SNR)``, ``SNR = Σ_j |G_j|² S/N_j`` (:func:`restore.integration.transfer.fused_snr`),
+    ``S`` the (two-sided) PSD prior of θ and ``N_j = σ_j² Δt`` the PSD of the white noise of pair j.
     """
     f = np.asarray(freq_hz, dtype=np.float64)
     s = np.interp(np.abs(f), spectrum["freq"], spectrum["psd"], left=0.0, right=0.0)
-    sig = np.broadcast_to(np.asarray(spectrum["noise_std"], dtype=np.float64), (len(taus),))
-    return fused_chain_gain(f, list(taus), signal_psd=s, noise_psd=np.maximum(sig * sig * te, 1e-300))
+    snr = fused_snr(f, s, spectrum["noise_std"], list(taus), te)
+    return snr / (1.0 + snr)
 
 
 def probe_window_gain(freq_hz, taus: Sequence[float], spectrum: dict, te: float, n: int, *,
