@@ -114,7 +114,7 @@ MEANING = {
     "restoration.points_per_line": "candidates per line and pair",
     "restoration.texture_max_std_px": "a-priori criterion: skip windows whose expected matching σ exceeds this [px]",
     "restoration.window_lines": "matching window height [lines] (PHR: 3)",
-    "restoration.window_columns": "matching window width [columns] (PHR: 31)",
+    "restoration.window_columns": "matching window width [columns], odd; \"auto\": the narrowest of 31, 47, 63 whose median a-priori matching σ is ≤ 0.1 px on the reference band (31 on the built-in scenes)",
     "restoration.search_lines": "integer search half-range around the prediction, lines [px]",
     "restoration.search_columns": "integer search half-range around the prediction, columns [px]",
     "restoration.pilot_search_lines": "wide search of the pilot pass, lines [px] (0: off)",

@@ -76,9 +76,7 @@ class Restorer:
         by block (memory bounded by one band) and ``result.corrected`` is that
         file opened lazily; otherwise they are kept in memory.
         """
-        # settings the product decides ("auto" high-pass from the AOCS knowledge's cut-off)
-        s = self.settings = replace(self._given, highpass_hz=stages.highpass_from_product(self._given.highpass_hz,
-                                                                                            product))
+        s = self.settings = self._settings_for(product)
         t_all = _time.perf_counter()
         timings: dict = {}
         pairs_ab = stages.resolve_pairs(product, s)
@@ -116,6 +114,16 @@ class Restorer:
                                  misregistration=misreg, settings=s, pixel_ifov_rad=product.pixel_ifov_rad,
                                  method=integration_method(s.method).name, integration=records,
                                  anchored=anchored, corrected=corrected)
+
+    def _settings_for(self, product: Product) -> RestorationSettings:
+        """The settings the product decides: the "auto" high-pass (from the AOCS knowledge's cut-off) and
+        the "auto" matching window width (from the reference band's noise and texture)."""
+        g = self._given
+        s = replace(g, highpass_hz=stages.highpass_from_product(g.highpass_hz, product))
+        if g.window_columns == "auto":
+            img = product.image(product.reference_detector, lines=slice(0, 1000))
+            s = replace(s, window=(g.window[0], stages.window_columns_for(img, window_lines=g.window[0])))
+        return s
 
     def _n_iterations(self, n_pairs: int) -> int:
         # best_first (patent claims 9-11): the best-correlated pair alone first, then the next ones

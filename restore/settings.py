@@ -21,6 +21,7 @@ class RestorationSettings:
     points_per_line: int = 24
     texture_max_std_px: float = 0.4
     window: tuple = (3, 31)
+    window_columns: int | str = "auto"
     search: tuple = (3, 3)
     pilot_search: tuple = (8, 8)
     match_method: str = "ncc"
@@ -57,12 +58,13 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.points_per_line = sec.integer("points_per_line", s.points_per_line, ge=3, le=1000)
     s.texture_max_std_px = sec.number("texture_max_std_px", s.texture_max_std_px, gt=0)
     wl = sec.integer("window_lines", s.window[0], ge=1, le=63)
-    wc = sec.integer("window_columns", s.window[1], ge=3, le=255)
+    wc = sec.number_or("window_columns", "auto", ge=3, le=255)
     if wl % 2 == 0:
         raise sec.error("window_lines", f"must be odd, got {wl}")
-    if wc % 2 == 0:
-        raise sec.error("window_columns", f"must be odd, got {wc}")
-    s.window = (wl, wc)
+    if wc != "auto" and (not float(wc).is_integer() or int(wc) % 2 == 0):
+        raise sec.error("window_columns", f"must be an odd integer or \"auto\", got {wc}")
+    s.window_columns = wc if wc == "auto" else int(wc)
+    s.window = (wl, s.window[1] if wc == "auto" else int(wc))
     s.search = (sec.integer("search_lines", s.search[0], ge=0, le=64), sec.integer("search_columns", s.search[1], ge=0, le=64))
     s.pilot_search = (sec.integer("pilot_search_lines", s.pilot_search[0], ge=0, le=64),
                       sec.integer("pilot_search_columns", s.pilot_search[1], ge=0, le=64))

@@ -21,7 +21,7 @@ from .integration.wiener import spectrum_for_lines
 from .matching import match_points, support_margin
 from .observability import observability
 from .result import IntegrationRecord, PairData
-from .selection import select_points_in_blocks
+from .selection import estimate_image_noise, expected_matching_std, select_points_in_blocks
 from .settings import RestorationSettings
 from .synthesis import (
     AXES,
@@ -303,6 +303,32 @@ def pair_differentials(pair: PairData, settings: RestorationSettings, n_lines: i
 HIGHPASS_FRACTION_OF_KNOWLEDGE = 0.2
 #: "auto" high-pass of a product that does not record its knowledge's cut-off [Hz]
 HIGHPASS_WITHOUT_KNOWLEDGE_SPEC_HZ = 2.0
+
+
+#: "auto" matching window: the candidate widths [columns], narrowest first
+WINDOW_COLUMN_CANDIDATES = (31, 47, 63)
+#: "auto" matching window: widen until the median a-priori matching σ is at most this [px]
+WINDOW_TARGET_STD_PX = 0.1
+
+
+def window_columns_for(image: np.ndarray, *, window_lines: int, max_lines: int = 1000) -> int:
+    """The narrowest window width whose median a-priori matching σ (Delon–Rougé) reaches the target.
+
+    A wider window averages more texture against the noise (σ ∝ 1/√width) but
+    follows the geometry less closely; on well-lit textured ground the
+    narrowest one already matches to better than ``WINDOW_TARGET_STD_PX``, on
+    a dim or flat scene the window widens (to the widest candidate at most).
+    Estimated on the first ``max_lines`` lines of the band.
+    """
+    img = np.asarray(image[:max_lines], dtype=np.float64)
+    noise = estimate_image_noise(img)
+    for w in WINDOW_COLUMN_CANDIDATES:
+        sl, sc = expected_matching_std(img, window=(window_lines, w), noise_std=noise)
+        s = np.maximum(sl, sc)
+        s = s[np.isfinite(s)]
+        if s.size and float(np.median(s)) <= WINDOW_TARGET_STD_PX:
+            return w
+    return WINDOW_COLUMN_CANDIDATES[-1]
 
 
 def highpass_from_product(setting, product: Product) -> float:

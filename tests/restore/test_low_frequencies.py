@@ -45,3 +45,17 @@ def test_a_line_the_aocs_does_not_know_survives_the_auto_highpass():
 
     assert amplitude(2.0) < 0.7
     assert amplitude(hp_auto) > 0.98
+
+
+def test_auto_window_widens_only_when_noise_dominates():
+    """Contrasted texture keeps the narrow window; the same texture at a tenth of the contrast, same noise, widens it."""
+    from reports.synthetic import textured_image
+    from restore.stages import WINDOW_COLUMN_CANDIDATES, window_columns_for
+
+    rng = np.random.default_rng(0)
+    tex = textured_image((600, 400), rng=rng)
+    noise = rng.standard_normal(tex.shape)
+    bright = 400.0 + 40.0 * tex + 2.0 * noise
+    dim = 400.0 + 4.0 * tex + 2.0 * noise
+    assert window_columns_for(bright, window_lines=3) == WINDOW_COLUMN_CANDIDATES[0]
+    assert window_columns_for(dim, window_lines=3) > WINDOW_COLUMN_CANDIDATES[0]
