@@ -328,11 +328,18 @@ def stress_scenarios() -> dict:
     return {p.stem: p for p in sorted((SCENARIO_DIR / "stress").glob("*.toml"))}
 
 
+def _predicted_rms(res, axis: str) -> float:
+    """RMS of the predicted σ over the restored lines of ``axis`` [rad]."""
+    ok = np.isfinite(res.restored[axis]) & np.isfinite(res.sigma[axis])
+    return float(np.sqrt(np.mean(res.sigma[axis][ok] ** 2))) if ok.any() else float("nan")
+
+
 def bench_robustness(*, lines: int | None = None) -> dict:
     """Render, restore and score every scenario of the stress suite (a failing one is recorded, not fatal).
 
     Per scenario: RMS and 99.7 % per restored axis [px], the AOCS knowledge's
-    RMS, coverage, the scenario's requirement and its verdict.
+    RMS, coverage, the unobservable part and the floor, the predicted RMS σ
+    and the ratio actual / predicted, the scenario's requirement and its verdict.
     """
     rows = []
     for name, path in stress_scenarios().items():
@@ -346,7 +353,11 @@ def bench_robustness(*, lines: int | None = None) -> dict:
             row.update(errors={a: e["errors"][a] for a in axes}, coverage=e["coverage"], restore_s=e["restore_s"],
                        requirement_rms_px=req, passed=all(e["errors"][a]["rms_px"] <= req for a in axes),
                        unobservable_rms_px={a: res.integration[a].unobservable_rms_rad / px for a in axes},
-                       floor_rms_px={a: res.integration[a].floor_rms_rad / px for a in axes})
+                       floor_rms_px={a: res.integration[a].floor_rms_rad / px for a in axes},
+                       predicted_rms_px={a: _predicted_rms(res, a) / px for a in axes if a in res.sigma},
+                       flagged_lines={a: int(res.flagged[a].sum()) for a in axes if a in res.flagged})
+            row["actual_over_predicted"] = {a: e["errors"][a]["rms_px"] / row["predicted_rms_px"][a]
+                                            for a in row["predicted_rms_px"]}
         except Exception as ex:  # one scenario failing must not sink the suite: say why in its row
             row["error"] = f"{type(ex).__name__}: {ex}"
         rows.append(row)
@@ -356,7 +367,7 @@ def bench_robustness(*, lines: int | None = None) -> dict:
 def _format_robustness(r: dict) -> list:
     out = [f"stress suite ({len(r['rows'])} scenarios{', ' + str(r['lines']) + ' lines' if r['lines'] else ''})",
            f"  {'scenario':24s} {'roll RMS':>9s} {'p99.7':>7s} {'pitch RMS':>10s} {'p99.7':>7s} {'AOCS RMS':>9s} "
-           f"{'coverage':>9s} {'unobservable':>13s} {'floor':>12s}  verdict"]
+           f"{'coverage':>9s} {'unobservable':>13s} {'floor':>12s} {'predicted σ':>12s} {'act/pred':>10s}  verdict"]
     for row in r["rows"]:
         if "error" in row:
             out.append(f"  {row['scenario']:24s} failed: {row['error'][:200]}")
@@ -369,7 +380,12 @@ def _format_robustness(r: dict) -> list:
         verdict = "PASS" if row["passed"] else f"FAIL (> {row['requirement_rms_px']} px)"
         uo = "/".join(f"{row['unobservable_rms_px'][a]:.3f}" for a in ("roll", "pitch") if a in row["unobservable_rms_px"])
         fl = "/".join(f"{row['floor_rms_px'][a]:.3f}" for a in ("roll", "pitch") if a in row["floor_rms_px"])
-        out.append(f"  {row['scenario']:24s}{cells}  {aocs:8.3f} {cov * 100:8.1f}% {uo:>13s} {fl:>12s}  {verdict}")
+        ps = "/".join(f"{row['predicted_rms_px'][a]:.3f}" for a in ("roll", "pitch")
+                      if a in row.get("predicted_rms_px", {}))
+        ra = "/".join(f"{row['actual_over_predicted'][a]:.2f}" for a in ("roll", "pitch")
+                      if a in row.get("actual_over_predicted", {}))
+        out.append(f"  {row['scenario']:24s}{cells}  {aocs:8.3f} {cov * 100:8.1f}% {uo:>13s} {fl:>12s} {ps:>12s} "
+                   f"{ra:>10s}  {verdict}")
     return out
 
 

@@ -265,6 +265,55 @@ def draw_budget(ax, rows: list, *, unit: str = "px"):
     return ax.figure
 
 
+# ----------------------------------------------------------------------------- uncertainty
+def uncertainty_figure():
+    """Figure with 1 × 2 axes: (σ and |error| over time, actual against predicted)."""
+    with matplotlib.rc_context(P.STYLE):
+        fig = Figure(figsize=(11.0, 3.6), layout="constrained")
+        axs = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.8, 1.0]})
+    for ax in axs:
+        P._style_axes(ax)
+    return fig, axs
+
+
+def draw_uncertainty(axs, d: dict, axis: str, *, ifov_rad: float):
+    """Left: ±σ and ±2σ bands with the actual error per line (if known), flagged lines marked.
+    Right: actual RMS error against predicted σ per σ-quantile bin, with the 1:1 line and the × 1.5 band."""
+    ax, cal = axs
+    t, sg = d["time_s"], d["sigma"] / ifov_rad
+    ax.fill_between(t, -2 * sg, 2 * sg, color=C_REST, alpha=0.15, lw=0, label="±2σ predicted")
+    ax.fill_between(t, -sg, sg, color=C_REST, alpha=0.3, lw=0, label="±1σ predicted")
+    if "error" in d:
+        x, y = minmax_decimate(t, d["error"] / ifov_rad, 6000)
+        ax.plot(x, y, color=C_ERR, lw=0.5, label="actual error (restored − true)")
+    if d["flagged"].any():
+        tf = t[d["flagged"]]
+        ax.plot(tf, np.zeros(tf.size), ls="none", marker="|", color="#000000", ms=8,
+                label=f"flagged ({int(d['flagged'].sum())} lines, σ > {d['flag_limit'] / ifov_rad:.3f} px)")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(f"{axis} [px]")
+    ax.legend(loc="upper right", fontsize=8, frameon=False, ncol=2)
+    if "calibration" in d and d["calibration"]["predicted"].size:
+        c = d["calibration"]
+        p, a = c["predicted"] / ifov_rad, c["actual"] / ifov_rad
+        lo, hi = 0.8 * min(p.min(), a.min()), 1.25 * max(p.max(), a.max())
+        xx = np.array([lo, hi])
+        cal.fill_between(xx, xx / 1.5, xx * 1.5, color="#999999", alpha=0.2, lw=0, label="within × 1.5")
+        cal.plot(xx, xx, color="#666666", lw=1, label="actual = predicted")
+        cal.plot(p, a, marker="o", color=C_ERR, lw=1, label="lines binned by predicted σ")
+        cal.set_xscale("log")
+        cal.set_yscale("log")
+        cal.set_xlim(lo, hi)
+        cal.set_ylim(lo, hi)
+        cal.set_xlabel("predicted σ (RMS in bin) [px]")
+        cal.set_ylabel("actual RMS error [px]")
+        cal.legend(loc="upper left", fontsize=8, frameon=False)
+    else:
+        cal.text(0.5, 0.5, "actual error needs truth.nc", ha="center", va="center", transform=cal.transAxes)
+        cal.set_axis_off()
+    return ax.figure
+
+
 # ----------------------------------------------------------------------------- matches
 def match_density_figure(n_pairs: int):
     return P.new_axes_grid(max(1, n_pairs), figsize=(11.0, 2.3 * max(1, n_pairs) + 0.9), sharex=True)

@@ -446,6 +446,32 @@ def _budget_section(pg: _Page, run: D.RunData, integrate, max_integration_s: flo
     return bud
 
 
+def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
+    unc = D.uncertainty(run)
+    if not unc:
+        return
+    pg.section("uncertainty", "Predicted uncertainty")
+    ifov = sc["ifov_rad"]
+    rows = []
+    for a, d in unc.items():
+        rows.append([_e(a), _fmt(d["predicted_rms"] / ifov), _fmt(d.get("actual_rms", np.nan) / ifov),
+                     _fmt(d.get("ratio", np.nan), 2), _fmt(d.get("within_2sigma", np.nan) * 100, 1),
+                     str(int(d["flagged"].sum())), _fmt(d["noise_scale"], 2)])
+    pg.table(["axis", "predicted RMS σ [px]", "actual RMS [px]", "actual / predicted", "lines within 2σ [%]",
+              "flagged lines", "noise inflation"], rows)
+    for a, d in unc.items():
+        fig, axs = RP.uncertainty_figure()
+        RP.draw_uncertainty(axs, d, a, ifov_rad=ifov)
+        pg.figure(fig, f"uncertainty_{a}.png",
+                  f"{a}: the restoration's predicted 1-σ per line (Monte Carlo through its own integration: prior "
+                  f"and noise as it estimated them, the record's gaps, lags and weights)"
+                  + (" against the actual error; right, lines binned by predicted σ." if "error" in d else "."))
+    pg.para("Lines whose predicted σ exceeds restoration.max_sigma_px (\"auto\": 3 × the axis's median) are not "
+            "restored and are counted as flagged, not as valid. A ratio near 1 says the error model holds; well "
+            "above 1, the error comes from something the model does not hold (a blind frequency, an unmodelled "
+            "axis, a bias): see the error budget.")
+
+
 def _matches_section(pg: _Page, run: D.RunData):
     pg.section("matches", "Matches on the image and misregistration")
     dens = D.match_density(run)
@@ -660,6 +686,8 @@ def make_run_report(run_dir, *, out_dir=None, integrator: Callable | None = None
     t = _time.perf_counter()
     bud = _budget_section(pg, run, integrate, max_integration_s)
     timings["budget_s"] = _time.perf_counter() - t
+    stage("predicted uncertainty")
+    _uncertainty_section(pg, run, sc)
     stage("matches")
     t = _time.perf_counter()
     _matches_section(pg, run)

@@ -20,6 +20,7 @@ import xarray as xr
 from simsat.product import ProductError
 
 from .axis_integration import PriorSpectrum
+from .stages import sigma_limit
 from .result import IntegrationRecord, PairData, RestorationResult
 from .settings import RestorationSettings, settings_dict
 from .synthesis import AXES
@@ -216,6 +217,13 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
                                         for a, rec in res.integration.items()}, sort_keys=True)}
     for a in AXES:
         attrs[f"coverage_{a}"] = res.coverage[a]
+    for a, sg in res.sigma.items():
+        data[f"sigma_{a}"] = ("time", sg, {"units": "rad", "long_name": f"predicted 1-sigma of the restored {a}",
+                                           "noise_scale": float(res.noise_scale.get(a, 1.0)),
+                                           "flag_limit_rad": sigma_limit(sg, res.settings.max_sigma_px,
+                                                                         res.pixel_ifov_rad)})
+        data[f"flagged_{a}"] = ("time", np.asarray(res.flagged.get(a, np.zeros(sg.size, bool)), dtype=np.int8), {
+            "long_name": f"1: {a} not restored, predicted sigma above restoration.max_sigma_px"})
     coords.update({"time": ("time", res.time, {"units": "s"}), "pair": ("pair", np.array(names))})
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
@@ -293,7 +301,11 @@ def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult
         timings=js("timings", "{}"), misregistration=js("misregistration", "{}"),
         settings=_settings_from(js("settings", "{}")), pixel_ifov_rad=float(ds.attrs["pixel_ifov_rad"]),
         method=str(ds.attrs["method"]), integration=_records_from(ds, js("integration", "{}")),
-        anchored=bool(int(ds.attrs.get("anchored_on_star_tracker", 0))), path=Path(path) if path else None)
+        anchored=bool(int(ds.attrs.get("anchored_on_star_tracker", 0))), path=Path(path) if path else None,
+        sigma={a: _values(ds, f"sigma_{a}") for a in AXES if f"sigma_{a}" in ds.variables},
+        flagged={a: _values(ds, f"flagged_{a}", np.int8) != 0 for a in AXES if f"flagged_{a}" in ds.variables},
+        noise_scale={a: float(ds[f"sigma_{a}"].attrs.get("noise_scale", 1.0)) for a in AXES
+                     if f"sigma_{a}" in ds.variables})
 
 
 def read_restoration(path: str | Path, *, product_time: np.ndarray | None = None) -> RestorationResult:

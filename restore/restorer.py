@@ -87,13 +87,18 @@ class Restorer:
             timings["matching_s"] = _time.perf_counter() - t
             knowledge = dict(zip(AXES, product.knowledge.at(product.time)))
             pairs, records, estimate = self.synthesise_and_integrate(product, pairs, knowledge, timings, bar)
+            bar.note("predicted σ (Monte Carlo through the integration)")
+            t = _time.perf_counter()
+            sigma = stages.predicted_sigma(records, product, s)
+            timings["posterior_s"] = _time.perf_counter() - t
+            estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad)
             correction = stages.remove_mean(estimate, s.axes)
             restored = {a: knowledge[a] + correction[a] for a in AXES}
             anchored = False
             if s.anchor_star_tracker:
                 restored, anchored = stages.anchor_on_star_tracker(restored, product.time, product.star_tracker,
                                                                    s.axes)
-            coverage = stages.check_coverage(restored, s, product.path)
+            coverage = stages.check_coverage(restored, s, product.path, flagged)
             bar.step("integrated")
             t = _time.perf_counter()
             corrected, misreg = None, {}
@@ -113,7 +118,9 @@ class Restorer:
                                  correction=correction, coverage=coverage, pairs=pairs, timings=timings,
                                  misregistration=misreg, settings=s, pixel_ifov_rad=product.pixel_ifov_rad,
                                  method=integration_method(s.method).name, integration=records,
-                                 anchored=anchored, corrected=corrected)
+                                 anchored=anchored, corrected=corrected,
+                                 sigma={a: ps.sigma for a, ps in sigma.items()}, flagged=flagged,
+                                 noise_scale={a: ps.noise_scale for a, ps in sigma.items()})
 
     def _settings_for(self, product: Product) -> RestorationSettings:
         """The settings the product decides: the "auto" high-pass (from the AOCS knowledge's cut-off) and

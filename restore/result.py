@@ -76,16 +76,20 @@ class IntegrationRecord:
     unobservable_rms_rad: float = float("nan")
     floor_rms_rad: float = float("nan")
 
-    def rerun(self, diffs=None, *, frozen: bool = True) -> np.ndarray:
+    def rerun(self, diffs=None, *, frozen: bool = True, lags=None) -> np.ndarray:
         """Integrate other differentials (true ones, noisy ones) through this axis's integration.
 
         With ``frozen`` a data-adaptive method keeps the prior it estimated on
         the measured differentials: the filter is the one that was applied.
+        ``lags`` (pair, line) [s] replaces the recorded per-line lags (zeros:
+        differentials simulated at the nominal delays need no time
+        synchronisation).
         """
         opts = integration_method(self.method).frozen_options(self.options, self.spectrum if frozen else None)
         d = self.diffs if diffs is None else np.asarray(diffs, dtype=np.float64)
+        lg = self.lags_s if lags is None else np.asarray(lags, dtype=np.float64)
         return integrate_axis(list(d), list(self.taus), self.line_period_s, method=self.method, options=opts,
-                              lags=list(self.lags_s), sigmas=list(self.sigmas), weights=list(self.weights),
+                              lags=list(lg), sigmas=list(self.sigmas), weights=list(self.weights),
                               highpass_hz=self.highpass_hz).theta
 
     def frozen_options(self) -> dict:
@@ -113,6 +117,12 @@ class RestorationResult:
     anchored: bool = False
     path: Path | None = None
     corrected: object = None
+    #: per restored axis: predicted 1-σ per line [rad] (NaN: not restored), see :mod:`restore.posterior`
+    sigma: dict = field(default_factory=dict)
+    #: per restored axis: lines not restored because their predicted σ exceeded ``max_sigma_px``
+    flagged: dict = field(default_factory=dict)
+    #: per restored axis: factor the residual check applied to the modelled noise
+    noise_scale: dict = field(default_factory=dict)
 
     def summary(self) -> str:
         """A few lines for the terminal: pairs, matches, coverage, correction, misregistration, speed."""
@@ -126,6 +136,12 @@ class RestorationResult:
                          f"synthesis residual {p.residual_rms_px:.3f} px")
         cov = ", ".join(f"{a} {self.coverage[a] * 100:.1f} %" for a in self.settings.axes)
         lines.append(f"  coverage: {cov}")
+        if self.sigma:
+            pred = ", ".join(f"{a} {np.sqrt(np.nanmean(self.sigma[a] ** 2)) / px:.3f} px"
+                             + (f" ({int(self.flagged[a].sum())} lines flagged: predicted σ above the limit)"
+                                if a in self.flagged and self.flagged[a].any() else "")
+                             for a in self.settings.axes if a in self.sigma)
+            lines.append(f"  predicted error (1σ RMS): {pred}")
         corr = ", ".join(f"{a} {np.nanstd(self.correction[a]) / px:.3f} px rms" for a in self.settings.axes)
         lines.append(f"  correction applied: {corr}")
         for k, v in (self.misregistration or {}).items():

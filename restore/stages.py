@@ -13,6 +13,7 @@ import numpy as np
 from simsat.attitude import AttitudeSeries
 from simsat.config import ScenarioError
 from simsat.product import Product
+from simsat.units import RAD_PER_URAD
 
 from .axis_integration import integrate_axis
 from .correction import correct_bands, line_median, misregistration, rank_within_line
@@ -20,6 +21,7 @@ from .errors import RestorationError
 from .integration.wiener import spectrum_for_lines
 from .matching import match_points, support_margin
 from .observability import observability
+from .posterior import posterior_sigma
 from .result import IntegrationRecord, PairData
 from .selection import estimate_image_noise, expected_matching_std, select_points_in_blocks
 from .settings import RestorationSettings
@@ -33,7 +35,7 @@ from .synthesis import (
 
 __all__ = ["auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "select_candidates", "match_candidates",
            "match_pair", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "integrate_differentials", "remove_mean", "anchor_on_star_tracker", "check_coverage", "correct_images",
+           "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -378,6 +380,52 @@ def integrate_differentials(axis: str, used: list, differentials: list, previous
                              floor_rms_rad=obs.floor_rms_rad)
 
 
+# --------------------------------------------------------------------------- uncertainty
+def predicted_sigma(records: dict, product: Product, settings: RestorationSettings) -> dict:
+    """Predicted 1-σ per line of each restored axis [rad] (:func:`restore.posterior.posterior_sigma`).
+
+    The AOCS knowledge's noise, as the product records it, counts below the
+    high-pass. Returns ``{axis: PosteriorSigma}``; empty with
+    ``posterior_samples = 0``.
+    """
+    if settings.posterior_samples < 2:
+        return {}
+    attrs = product.ds.attrs
+    noise = float(attrs.get("knowledge_noise_urad", 0.0)) * RAD_PER_URAD
+    rate = float(attrs["knowledge_rate_hz"]) if "knowledge_rate_hz" in attrs else None
+    return {a: posterior_sigma(rec, samples=settings.posterior_samples, seed=k, knowledge_noise_rad=noise,
+                               knowledge_rate_hz=rate)
+            for k, (a, rec) in enumerate(sorted(records.items()))}
+
+
+#: "auto" ``max_sigma_px``: a line is flagged when its predicted σ exceeds this many times the axis's median
+AUTO_SIGMA_LIMIT_FACTOR = 3.0
+
+
+def sigma_limit(sigma: np.ndarray, setting, pixel_ifov_rad: float) -> float:
+    """The σ above which a line is flagged [rad]: ``max_sigma_px`` in pixels, or "auto" (3 × the median σ)."""
+    if setting == "auto":
+        s = sigma[np.isfinite(sigma)]
+        return float(AUTO_SIGMA_LIMIT_FACTOR * np.median(s)) if s.size else float("inf")
+    return float(setting) * pixel_ifov_rad
+
+
+def flag_uncertain(correction: dict, sigma: dict, setting, pixel_ifov_rad: float) -> tuple[dict, dict]:
+    """Lines whose predicted σ exceeds the limit (:func:`sigma_limit`) are not restored (NaN), and flagged.
+
+    Short clear islands between clouds and the lines at a gap's edge are
+    where σ rises: they are reported as flagged, not silently valid. Returns
+    ``(correction, flagged)`` with ``flagged[axis]`` a boolean per line.
+    """
+    out, flagged = dict(correction), {}
+    for a, ps in sigma.items():
+        limit = sigma_limit(ps.sigma, setting, pixel_ifov_rad)
+        f = np.isfinite(out[a]) & ~(ps.sigma <= limit)
+        out[a] = np.where(f, np.nan, out[a])
+        flagged[a] = f
+    return out, flagged
+
+
 # --------------------------------------------------------------------------- anchor
 def remove_mean(estimate: dict, axes) -> dict:
     """The correction with its (unobservable) mean removed on the restored axes."""
@@ -409,14 +457,17 @@ def anchor_on_star_tracker(restored: dict, t_line: np.ndarray, star_tracker, axe
     return out, anchored
 
 
-def check_coverage(restored: dict, settings: RestorationSettings, where) -> dict:
+def check_coverage(restored: dict, settings: RestorationSettings, where, flagged: dict | None = None) -> dict:
     """Fraction of lines restored per axis; refuses a restored axis below ``min_coverage``."""
     coverage = {a: float(np.mean(np.isfinite(restored[a]))) for a in AXES}
     for a in settings.axes:
         if coverage[a] < settings.min_coverage:
+            n_flag = int(np.count_nonzero(flagged[a])) if flagged and a in flagged else 0
+            why = (f"; {n_flag} lines were flagged for a predicted σ above restoration.max_sigma_px = "
+                   f"{settings.max_sigma_px}" if n_flag else "")
             raise RestorationError(f"{where}: coverage on {a} is {coverage[a] * 100:.1f} % "
                                    f"(< restoration.min_coverage = {settings.min_coverage * 100:.0f} %): "
-                                   "not enough texture to restore")
+                                   f"not enough texture to restore{why}")
     return coverage
 
 

@@ -22,7 +22,8 @@ Conventions
   estimated).
 
 The functions live in one module per job: :mod:`.loading`, :mod:`.headline`,
-:mod:`.series`, :mod:`.transfer`, :mod:`.budget`, :mod:`.matches`, :mod:`.scene`.
+:mod:`.series`, :mod:`.transfer`, :mod:`.budget`, :mod:`.uncertainty`, :mod:`.matches`,
+:mod:`.scene`.
 """
 from __future__ import annotations
 
@@ -46,6 +47,7 @@ from .matches import (
 )
 from .scene import scene_geometry
 from .series import longest_finite_run, minmax_decimate, zoom_window
+from .uncertainty import sigma_calibration, uncertainty
 from .transfer import (
     analytic_chain_gain,
     analytic_joint_gain,
@@ -59,4 +61,4 @@ from .transfer import (
     welch_settings,
 )
 
-__all__ = ["AXES", "RunData", "load_run", "get_integrator", "pair_file_tag", "scenario_summary", "restored_axes", "attitude_table", "headline", "minmax_decimate", "longest_finite_run", "zoom_window", "welch_settings", "spectra", "frozen_chain_gain", "probe_window_gain", "integration_probe", "measured_transfer", "analytic_chain_gain", "analytic_joint_gain", "regularisation_k", "transfer_curves", "integration_record", "line_lags", "true_differentials", "measured_differentials", "axis_integration", "error_budget", "BUDGET_COMPONENTS", "match_density", "misregistration_rows", "misregistration_with_true_attitude", "scene_geometry"]
+__all__ = ["AXES", "RunData", "load_run", "get_integrator", "pair_file_tag", "scenario_summary", "restored_axes", "attitude_table", "headline", "minmax_decimate", "longest_finite_run", "zoom_window", "welch_settings", "spectra", "frozen_chain_gain", "probe_window_gain", "integration_probe", "measured_transfer", "analytic_chain_gain", "analytic_joint_gain", "regularisation_k", "transfer_curves", "integration_record", "line_lags", "true_differentials", "measured_differentials", "axis_integration", "error_budget", "BUDGET_COMPONENTS", "match_density", "misregistration_rows", "misregistration_with_true_attitude", "scene_geometry", "uncertainty", "sigma_calibration"]

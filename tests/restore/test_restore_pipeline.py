@@ -283,6 +283,44 @@ def test_restoration_round_trips_through_its_file(tiny_restored):
         assert 0 <= rec.unobservable_rms_rad <= rec.floor_rms_rad + rec.unobservable_rms_rad and rec.floor_rms_rad > 0
         for k in ("freq", "psd", "noise_std"):  # the prior wiener estimated from the data
             np.testing.assert_array_equal(getattr(got.spectrum, k), getattr(rec.spectrum, k))
+    assert set(back.sigma) == set(res.sigma) == set(res.settings.axes)
+    for a in res.sigma:
+        np.testing.assert_array_equal(back.sigma[a], res.sigma[a])
+        np.testing.assert_array_equal(back.flagged[a], res.flagged[a])
+        assert back.noise_scale[a] == res.noise_scale[a]
+
+
+def test_every_restored_line_has_a_predicted_sigma_and_flagged_lines_are_not_restored(tiny_restored):
+    d, res = tiny_restored
+    ds = xr.load_dataset(d / "restoration.nc")
+    for a in res.settings.axes:
+        sg = ds[f"sigma_{a}"].values
+        restored = np.isfinite(ds[a].values)
+        assert np.all(np.isfinite(sg[restored]) & (sg[restored] > 0))
+        flagged = ds[f"flagged_{a}"].values.astype(bool)
+        assert not np.any(restored & flagged)
+        assert np.all(sg[flagged] > ds[f"sigma_{a}"].attrs["flag_limit_rad"])
+        # "auto": 3 × the median σ
+        assert ds[f"sigma_{a}"].attrs["flag_limit_rad"] == pytest.approx(3 * np.nanmedian(sg))
+
+
+def test_a_sigma_limit_below_every_line_flags_them_all_and_says_so(tiny_restored, tmp_path):
+    d, _ = tiny_restored
+    run = tmp_path / "tiny"
+    shutil.copytree(d, run)
+    with pytest.raises(RestorationError, match="flagged for a predicted σ above restoration.max_sigma_px"):
+        restore_run(run, progress=False, overrides={"max_sigma_px": 1e-6})
+
+
+def test_posterior_samples_zero_writes_no_sigma_and_one_is_refused(tiny_restored, tmp_path):
+    with pytest.raises(ScenarioError, match="posterior_samples"):
+        restoration_settings({"posterior_samples": 1})
+    s = {"posterior_samples": 0, "correct_images": False}
+    d, _ = tiny_restored
+    run = tmp_path / "tiny"
+    shutil.copytree(d, run)
+    res = restore_run(run, progress=False, overrides=s)
+    assert res.sigma == {} and "sigma_roll" not in xr.load_dataset(run / "restoration.nc")
 
 
 def test_recorded_lags_are_the_inliers_line_residuals_and_were_integrated_with(tiny_restored):

@@ -1,0 +1,241 @@
+"""Predicted 1-σ of the restored attitude, line by line, from the integration's own error model.
+
+The restoration models each axis as a Gaussian stationary attitude of PSD
+``S(f)`` (the prior the integration estimated from the differentials) seen by
+pair ``j`` through ``θ(t + τ_j + λ_j(t)) − θ(t)`` plus independent noise of
+σ_j(t) per line (the pair's noise level scaled by its per-line weight). The
+error the integration makes under that model is measured by Monte Carlo
+*through the integration itself* (perturbation sampling, "sample then
+optimise"):
+
+1. draw an attitude ``θ_s`` from the prior and noise ``b_s`` from the noise
+   model;
+2. form the differentials the pairs would have measured, with the record's
+   gaps, per-line lags and weights;
+3. integrate them with the frozen filter the restoration applied
+   (:meth:`~restore.result.IntegrationRecord.rerun`);
+4. the error ``θ̂_s − hp(θ_s)`` (``hp``: the restoration's high-pass, since below
+   it the AOCS knowledge answers) is a draw of the estimation error.
+
+For the exact Wiener / MAP integration the spread of those errors is the
+posterior covariance (the Kalman/RTS variance of the same model); for any
+other method it is that method's error under the model. Gaps, record ends,
+short clear islands between clouds and per-line weights all show: no
+stationarity is assumed.
+
+The noise level is then checked against the data: the residual of the real
+differentials about the fit, ``d_j − (θ̂(t + τ_j) − θ̂(t))``, is compared with
+the same residual on the simulated draws. Matching errors that are larger or
+more correlated than the white model (window compensation, texture-dependent
+biases) leave a larger residual; the noise is inflated by the ratio, so the
+prediction does not inherit an optimistic noise model.
+
+Below the high-pass, the AOCS knowledge's own noise (recorded in the product)
+adds ``σ_k² · 2 f_hp / f_k`` (white noise at the knowledge rate ``f_k``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.fft import irfft, next_fast_len, rfft
+from scipy.interpolate import CubicSpline
+from scipy.ndimage import uniform_filter1d
+
+from .synthesis import highpass_nan
+
+__all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", "simulated_differentials",
+           "fit_residual_rms", "knowledge_noise_below"]
+
+
+#: the real fit residual may exceed the simulated one by this factor before the noise is inflated
+NOISE_CHECK_TOLERANCE = 1.05
+
+
+@dataclass
+class PosteriorSigma:
+    """Result of :func:`posterior_sigma` for one axis.
+
+    Attributes
+    ----------
+    sigma : ndarray (lines,)
+        Predicted 1-σ of the restored angle [rad], NaN where not restored.
+    noise_scale : float
+        Factor applied to the modelled noise after the residual check (≥ 1).
+    samples : int
+        Monte Carlo draws.
+    """
+
+    sigma: np.ndarray
+    noise_scale: float
+    samples: int
+
+
+def noise_per_line(record) -> np.ndarray:
+    """Noise σ of each pair's differential at each line [rad], NaN at gaps (pair, line).
+
+    The integration's own model: the pair's noise level (from the prior it
+    estimated) over the square root of the line's relative weight (mean 1 over
+    the valid lines). A method that reports no noise level falls back on the
+    per-line formal σ of the synthesis.
+    """
+    d = np.asarray(record.diffs, dtype=np.float64)
+    valid = np.isfinite(d)
+    if record.spectrum is not None:
+        w = np.where(valid, np.asarray(record.weights, dtype=np.float64), np.nan)
+        w = w / np.nanmean(w, axis=1, keepdims=True)
+        sig = np.asarray(record.spectrum.noise_std, dtype=np.float64)[:, None] / np.sqrt(w)
+    else:
+        sig = np.asarray(record.sigmas, dtype=np.float64)
+        fallback = np.nanmedian(np.where(valid, sig, np.nan), axis=1, keepdims=True)
+        sig = np.where(np.isfinite(sig) & (sig > 0), sig, fallback)
+    return np.where(valid, sig, np.nan)
+
+
+def prior_draw(freq: np.ndarray, psd: np.ndarray, n: int, dt: float, rng: np.random.Generator) -> np.ndarray:
+    """One draw of a stationary Gaussian signal of two-sided PSD ``psd`` on ``freq`` [rad²/Hz], ``n`` samples."""
+    m = next_fast_len(2 * n)
+    f = np.fft.rfftfreq(m, dt)
+    s = np.interp(f, freq, psd, left=0.0, right=0.0)
+    w = rng.standard_normal(m)
+    return irfft(rfft(w) * np.sqrt(s / dt), n=m)[:n]
+
+
+def simulated_differentials(theta: np.ndarray, taus, lags, valid: np.ndarray, dt: float) -> np.ndarray:
+    """``θ(t + τ_j + λ_j(t)) − θ(t)`` at the record's lines (pair, line), NaN where ``valid`` is False.
+
+    ``theta`` is sampled at ``n dt`` over at least the record plus the longest lag.
+    """
+    n = valid.shape[1]
+    spline = CubicSpline(np.arange(theta.size), theta)
+    idx = np.arange(n, dtype=np.float64)
+    out = np.empty(valid.shape)
+    for j, (tau, lag) in enumerate(zip(taus, lags)):
+        out[j] = spline(idx + (tau + np.nan_to_num(np.asarray(lag, dtype=np.float64))) / dt) - theta[:n]
+    return np.where(valid, out, np.nan)
+
+
+def fit_residual_rms(diffs: np.ndarray, theta: np.ndarray, taus, lags, dt: float, *, highpass_hz: float) -> float:
+    """RMS of the differentials about the ones the estimate ``theta`` predicts (above the high-pass).
+
+    Only lines where ``theta`` is known at both ends of the pair's delay count.
+    """
+    d = np.asarray(diffs, dtype=np.float64)
+    th = np.asarray(theta, dtype=np.float64)
+    n = th.size
+    known = np.isfinite(th)
+    ext = np.concatenate([np.nan_to_num(th), np.zeros(int(np.ceil(max(taus) / dt)) + 8)])
+    idx = np.arange(n, dtype=np.float64)
+    ok = np.isfinite(d) & known[None, :]
+    for j, (tau, lag) in enumerate(zip(taus, lags)):
+        at = idx + (tau + np.nan_to_num(np.asarray(lag, dtype=np.float64))) / dt
+        ahead = np.round(at).astype(np.int64)
+        ok[j] &= (at <= n - 1) & known[np.clip(ahead, 0, n - 1)]
+    r = d - simulated_differentials(ext, taus, lags, ok, dt)
+    if highpass_hz > 0:
+        r = np.array([highpass_nan(x, dt=dt, cutoff_hz=highpass_hz) for x in r])
+    ok = np.isfinite(r)
+    return float(np.sqrt(np.mean(r[ok] ** 2))) if ok.any() else float("nan")
+
+
+def knowledge_noise_below(n: int, dt: float, highpass_hz: float, noise_rad: float, rate_hz: float,
+                          rng: np.random.Generator) -> np.ndarray:
+    """One draw of the AOCS knowledge noise the images leave uncorrected: below the high-pass [rad].
+
+    White noise of ``noise_rad`` per telemetry sample at ``rate_hz``,
+    interpolated (cubic) at the ``n`` line times, minus its high-passed part
+    (above the high-pass the images see, and correct, the knowledge's error).
+    """
+    span = n * dt
+    k = int(np.ceil(span * rate_hz)) + 4
+    ts = (np.arange(k) - 2) / rate_hz
+    x = CubicSpline(ts, rng.standard_normal(k) * noise_rad)(np.arange(n) * dt)
+    return x - highpass_nan(x, dt=dt, cutoff_hz=highpass_hz) if highpass_hz > 0 else np.zeros(n)
+
+
+def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: int = 31,
+                    check_noise: bool = True, knowledge_noise_rad: float = 0.0,
+                    knowledge_rate_hz: float | None = None) -> PosteriorSigma:
+    """Predicted 1-σ per line of one axis's restored angle (see the module's docstring).
+
+    Parameters
+    ----------
+    record : restore.result.IntegrationRecord
+        The axis's last integration (from the pipeline or read back).
+    samples : int
+        Monte Carlo draws (the relative error of σ is about ``1 / √(2 · samples · smooth_lines)``).
+    seed : int
+        Seed of the draws (same seed, same bytes).
+    smooth_lines : int
+        The draws' squared errors are averaged over this many lines (σ varies
+        over tens of lines, except at gap edges where a few lines blur).
+    check_noise : bool
+        Inflate the noise by the ratio of the real to the simulated fit residual.
+    knowledge_noise_rad, knowledge_rate_hz : float
+        The AOCS knowledge's white noise per sample and its rate (as the
+        product records them): what of it lies below the high-pass stays in
+        the restored angle. 0 / None: not counted.
+
+    Returns
+    -------
+    PosteriorSigma
+    """
+    if samples < 2:
+        raise ValueError(f"samples: must be >= 2, got {samples}")
+    d = np.asarray(record.diffs, dtype=np.float64)
+    valid = np.isfinite(d)
+    n = d.shape[1]
+    dt = float(record.line_period_s)
+    taus = [float(t) for t in record.taus]
+    # the draws see the recorded per-line lags: at large amplitude the time synchronisation's own error
+    # is a good part of the total
+    lags = [np.nan_to_num(np.asarray(lg, dtype=np.float64)) for lg in record.lags_s]
+    freq, psd = _prior(record)
+    noise = noise_per_line(record)
+    ext = n + int(np.ceil((max(taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
+    rng = np.random.default_rng(seed)
+
+    def run(scale: float, k: int):
+        errs, resid = [], []
+        for _ in range(k):
+            th = prior_draw(freq, psd, ext, dt, rng)
+            ds = simulated_differentials(th, taus, lags, valid, dt) + scale * noise * rng.standard_normal(d.shape)
+            est = record.rerun(ds)
+            ref = highpass_nan(th[:n], dt=dt, cutoff_hz=record.highpass_hz) if record.highpass_hz > 0 else th[:n]
+            e = est - ref
+            if knowledge_noise_rad > 0 and knowledge_rate_hz:
+                e = e + knowledge_noise_below(n, dt, record.highpass_hz, knowledge_noise_rad, knowledge_rate_hz, rng)
+            ok = np.isfinite(e)
+            if ok.any():
+                e = e - np.mean(e[ok])
+            errs.append(e)
+            if check_noise:
+                resid.append(fit_residual_rms(ds, est, taus, lags, dt, highpass_hz=record.highpass_hz))
+        return np.array(errs), resid
+
+    errs, sim = run(1.0, samples)
+    scale = 1.0
+    if check_noise:
+        real = fit_residual_rms(d, np.asarray(record.increment, dtype=np.float64), taus, record.lags_s, dt,
+                                highpass_hz=record.highpass_hz)
+        sim_rms = float(np.nanmean(sim))
+        if np.isfinite(real) and sim_rms > 0 and real > NOISE_CHECK_TOLERANCE * sim_rms:
+            scale = real / sim_rms
+            errs, _ = run(scale, samples)
+    ok = np.isfinite(errs).any(axis=0)
+    var = np.where(ok, np.nanmean(np.where(np.isfinite(errs), errs ** 2, 0.0), axis=0) * errs.shape[0]
+                   / np.maximum(np.isfinite(errs).sum(axis=0), 1), np.nan)
+    if smooth_lines > 1:
+        num = uniform_filter1d(np.where(ok, var, 0.0), smooth_lines, mode="nearest")
+        den = uniform_filter1d(ok.astype(np.float64), smooth_lines, mode="nearest")
+        var = np.where(ok, num / np.maximum(den, 1e-12), np.nan)
+    return PosteriorSigma(sigma=np.sqrt(var), noise_scale=float(scale), samples=int(samples))
+
+
+def _prior(record) -> tuple[np.ndarray, np.ndarray]:
+    if record.spectrum is not None:
+        return np.asarray(record.spectrum.freq, dtype=np.float64), np.asarray(record.spectrum.psd, dtype=np.float64)
+    from .integration.wiener import spectrum_for_lines
+
+    sp = spectrum_for_lines(list(record.diffs), list(record.taus), record.line_period_s)
+    return np.asarray(sp.freq, dtype=np.float64), np.asarray(sp.psd, dtype=np.float64)

@@ -1,0 +1,156 @@
+"""Predicted σ per line (restore.posterior) against analytic cases: the Wiener error formula, gaps, noise checks."""
+import numpy as np
+import pytest
+
+from restore.axis_integration import PriorSpectrum
+from restore.observability import observability
+from restore.posterior import (
+    fit_residual_rms,
+    knowledge_noise_below,
+    noise_per_line,
+    posterior_sigma,
+    prior_draw,
+    simulated_differentials,
+)
+from restore.result import IntegrationRecord
+from restore.stages import flag_uncertain, sigma_limit
+
+TAUS = [7.4e-3, 14.8e-3, 22.2e-3]
+DT = 4e-4
+N = 3000
+
+
+def _coloured_psd(f, rms=2e-6, corner=40.0, band=(10.0, 120.0)):
+    """Two-sided PSD of a coloured jitter of ``rms`` [rad] (1/(1 + (f/corner)²) shape over ``band`` [Hz]).
+
+    The band stays clear of the pairs' common blind frequency (135 Hz) and of
+    the lowest frequencies, where a finite record does worse than the
+    infinite-record Wiener formula (the reason σ is computed by Monte Carlo).
+    """
+    shape = np.where((f >= band[0]) & (f <= band[1]), 1.0 / (1.0 + (f / corner) ** 2), 0.0)
+    df = f[1] - f[0]
+    return shape * rms ** 2 / (2 * shape.sum() * df)
+
+
+def _record(valid=None, noise=0.3e-6, seed=1, weights=None, noise_true=None):
+    """A record integrated with the frozen Wiener filter of a known prior and noise; diffs drawn from that model."""
+    f = np.fft.rfftfreq(8192, DT)
+    psd = _coloured_psd(f)
+    rng = np.random.default_rng(seed)
+    th = prior_draw(f, psd, N + 80, DT, rng)
+    lags = np.zeros((3, N))
+    valid = np.ones((3, N), bool) if valid is None else valid
+    d = simulated_differentials(th, TAUS, lags, valid, DT)
+    d = d + (noise if noise_true is None else noise_true) * rng.standard_normal(d.shape)
+    spec = PriorSpectrum(f, psd, np.full(3, noise))
+    rec = IntegrationRecord(axis="roll", pairs=["a/b", "b/c", "a/c"], diffs=d, sigmas=np.full((3, N), noise),
+                            taus=np.array(TAUS), lags_s=lags, weights=np.ones((3, N)) if weights is None else weights,
+                            line_period_s=DT, method="wiener", options={}, highpass_hz=0.0, spectrum=spec,
+                            increment=np.zeros(N), previous=np.zeros(N))
+    rec.increment = rec.rerun()
+    return rec, th
+
+
+def test_prior_draw_has_the_variance_of_its_psd():
+    f = np.fft.rfftfreq(4096, DT)
+    psd = _coloured_psd(f, rms=3e-6)
+    rng = np.random.default_rng(0)
+    v = np.mean([np.var(prior_draw(f, psd, 20000, DT, rng)) for _ in range(20)])
+    assert np.sqrt(v) == pytest.approx(3e-6, rel=0.05)
+
+
+def test_simulated_differentials_of_a_sine_are_exact():
+    t = np.arange(N + 100) * DT
+    th = np.sin(2 * np.pi * 20 * t)
+    d = simulated_differentials(th, [7.4e-3], [np.zeros(N)], np.ones((1, N), bool), DT)
+    ref = np.sin(2 * np.pi * 20 * (t[:N] + 7.4e-3)) - th[:N]
+    assert np.max(np.abs(d[0] - ref)) < 1e-6
+
+
+def test_mid_record_sigma_matches_the_stationary_wiener_error():
+    """Far from the ends, the posterior σ of a stationary model is the Wiener error ``√(2 ∫ S / (1 + SNR) df)``."""
+    rec, _ = _record()
+    ps = posterior_sigma(rec, samples=48, seed=3, check_noise=False)
+    mid = ps.sigma[N // 4: 3 * N // 4]
+    floor = observability(rec.spectrum.freq, rec.spectrum.psd, rec.spectrum.noise_std, TAUS, DT).floor_rms_rad
+    assert np.sqrt(np.mean(mid ** 2)) == pytest.approx(floor, rel=0.08)
+    assert ps.noise_scale == 1.0 and ps.samples == 48
+
+
+def test_sigma_is_the_spread_of_actual_errors_over_independent_records():
+    """The σ the record predicts is the RMS error of the restoration over records drawn from the same model."""
+    rec, _ = _record(seed=5)
+    ps = posterior_sigma(rec, samples=24, seed=7, check_noise=False)
+    errs = []
+    for s in range(12):
+        r, th = _record(seed=100 + s)
+        e = r.increment - th[:N]
+        errs.append(e - np.nanmean(e))
+    actual = np.sqrt(np.nanmean(np.array(errs) ** 2))
+    assert actual == pytest.approx(np.sqrt(np.nanmean(ps.sigma ** 2)), rel=0.15)
+
+
+def test_sigma_rises_on_a_short_island_between_gaps():
+    valid = np.ones((3, N), bool)
+    valid[:, 1000:1400] = False
+    valid[:, 1460:1900] = False  # a 60-line clear island between two clouds
+    rec, _ = _record(valid=valid)
+    ps = posterior_sigma(rec, samples=16, seed=2, check_noise=False)
+    island = np.nanmean(ps.sigma[1465:1455 + 60 - 5])
+    far = np.nanmean(ps.sigma[2300:2700])
+    assert island > 1.5 * far
+    flagged_corr, flagged = flag_uncertain({"roll": rec.increment}, {"roll": ps}, "auto", 1e-6)
+    assert flagged["roll"][1465:1510].any() and not flagged["roll"][2300:2700].any()
+    assert np.all(np.isnan(flagged_corr["roll"][flagged["roll"]]))
+
+
+def test_noise_larger_than_modelled_is_caught_by_the_residual_check():
+    rec, _ = _record(noise=0.1e-6, noise_true=0.3e-6)
+    ps = posterior_sigma(rec, samples=8, seed=1, check_noise=True)
+    assert ps.noise_scale == pytest.approx(3.0, rel=0.15)
+    ok, _ = _record(noise=0.1e-6)
+    assert posterior_sigma(ok, samples=8, seed=1, check_noise=True).noise_scale == 1.0
+
+
+def test_weights_lower_the_noise_of_heavy_lines():
+    w = np.ones((3, N))
+    w[:, : N // 2] = 4.0
+    rec, _ = _record(weights=w)
+    sig = noise_per_line(rec)
+    # mean-1 weights: (4, 1) → (1.6, 0.4); σ ∝ 1/√w
+    assert sig[0, 0] / sig[0, -1] == pytest.approx(0.5, rel=1e-9)
+
+
+def test_fit_residual_of_a_perfect_estimate_is_the_noise():
+    t = np.arange(N + 100) * DT
+    th = 1e-6 * np.sin(2 * np.pi * 30 * t)
+    valid = np.ones((3, N), bool)
+    rng = np.random.default_rng(0)
+    d = simulated_differentials(th, TAUS, np.zeros((3, N)), valid, DT) + 1e-8 * rng.standard_normal((3, N))
+    assert fit_residual_rms(d, th[:N], TAUS, np.zeros((3, N)), DT, highpass_hz=0.0) == pytest.approx(1e-8, rel=0.1)
+
+
+def test_knowledge_noise_below_the_highpass_is_the_low_band_of_white_noise():
+    rng = np.random.default_rng(0)
+    n, hp, rate, sig = 200000, 2.0, 50.0, 1e-6
+    x = knowledge_noise_below(n, DT, hp, sig, rate, rng)
+    # white at 50 Hz, Gaussian low-pass with -3 dB at 2 Hz: ≈ σ² · ∫ |H|² df / (rate / 2)
+    sigma_g = np.sqrt(np.log(2)) / (2 * np.pi * hp)
+    band = 1 / (4 * np.sqrt(np.pi) * sigma_g)  # ∫_0^∞ exp(-4π²σ²f²) df
+    assert np.std(x) == pytest.approx(sig * np.sqrt(band / (rate / 2)), rel=0.15)
+    assert not knowledge_noise_below(100, DT, 0.0, sig, rate, rng).any()
+
+
+def test_sigma_limit_auto_and_in_pixels():
+    s = np.array([1.0, 1.0, 1.0, np.nan, 10.0])
+    assert sigma_limit(s, "auto", 0.5) == pytest.approx(3.0)
+    assert sigma_limit(s, 0.1, 7e-6) == pytest.approx(0.7e-6)
+
+
+def test_same_seed_same_bytes():
+    rec, _ = _record()
+    a = posterior_sigma(rec, samples=4, seed=9).sigma
+    b = posterior_sigma(rec, samples=4, seed=9).sigma
+    assert a.tobytes() == b.tobytes()
+    with pytest.raises(ValueError, match="samples"):
+        posterior_sigma(rec, samples=1)
