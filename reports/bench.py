@@ -358,6 +358,9 @@ def bench_robustness(*, lines: int | None = None) -> dict:
                        flagged_lines={a: int(res.flagged[a].sum()) for a in axes if a in res.flagged})
             row["actual_over_predicted"] = {a: e["errors"][a]["rms_px"] / row["predicted_rms_px"][a]
                                             for a in row["predicted_rms_px"]}
+            if "rms_px_without_yaw_coupling" in e["errors"].get("pitch", {}):
+                row["pitch_without_yaw_coupling_rms_px"] = e["errors"]["pitch"]["rms_px_without_yaw_coupling"]
+                row["yaw_pitch_coupling"] = e["errors"]["pitch"]["yaw_pitch_coupling"]
         except Exception as ex:  # one scenario failing must not sink the suite: say why in its row
             row["error"] = f"{type(ex).__name__}: {ex}"
         rows.append(row)
@@ -386,6 +389,9 @@ def _format_robustness(r: dict) -> list:
                       if a in row.get("actual_over_predicted", {}))
         out.append(f"  {row['scenario']:24s}{cells}  {aocs:8.3f} {cov * 100:8.1f}% {uo:>13s} {fl:>12s} {ps:>12s} "
                    f"{ra:>10s}  {verdict}")
+        if "pitch_without_yaw_coupling_rms_px" in row:
+            out.append(f"  {'':24s} pitch without the yaw seen as pitch ({row['yaw_pitch_coupling']:.3f} × missed yaw): "
+                       f"{row['pitch_without_yaw_coupling_rms_px']:.4f} px RMS")
     return out
 
 

@@ -135,6 +135,8 @@ MEANING = {
     "restoration.correct_images": "write corrected.nc and measure misregistration before/after",
     "restoration.correction_column_step": "resampling grid exact every N columns, linear in between",
     "restoration.min_coverage": "least fraction of lines restored for the run to succeed",
+    "restoration.knowledge_prior": "bound the estimated prior PSD by what the AOCS knowledge already knows "
+                                   "(its recorded filter, rate and noise): nothing restored deep inside its band",
     "restoration.posterior_samples": "Monte Carlo draws through the integration for the predicted 1-σ per line "
                                      "(restoration.nc sigma_<axis>); 0: none",
     "restoration.max_sigma_px": "lines whose predicted σ exceeds this [px] are flagged and not restored; \"auto\": "

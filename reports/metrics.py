@@ -38,6 +38,10 @@ def truth_at(truth, axis: str, t) -> np.ndarray:
                      np.asarray(truth[axis].values))
 
 
+#: pitch errors are also given without the yaw seen as pitch when |yaw_pitch_coupling| exceeds this
+YAW_COUPLING_REPORTED = 0.02
+
+
 def attitude_errors(restoration, truth, *, axes=AXES) -> dict:
     """Per-axis error statistics of a restoration dataset against truth.
 
@@ -62,6 +66,13 @@ def attitude_errors(restoration, truth, *, axes=AXES) -> dict:
             k = error_stats(np.where(mask, kn - tru, np.nan), ifov_rad=ifov)
             s.update({f"knowledge_{key}": v for key, v in k.items() if key != "n"})
         s["coverage"] = float(mask.mean())
+        c = float(restoration.attrs.get("yaw_pitch_coupling", 0.0))
+        if a == "pitch" and abs(c) >= YAW_COUPLING_REPORTED and "knowledge_yaw" in restoration:
+            # off nadir the images see pitch + c × (yaw the knowledge misses): the error without that part
+            missed = truth_at(truth, "yaw", t) - np.asarray(restoration["knowledge_yaw"].values, dtype=np.float64)
+            w = error_stats(est - tru - c * missed, ifov_rad=ifov)
+            s["rms_px_without_yaw_coupling"], s["p997_px_without_yaw_coupling"] = w["rms_px"], w["p997_px"]
+            s["yaw_pitch_coupling"] = c
         out[a] = s
     return out
 

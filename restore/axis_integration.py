@@ -98,7 +98,8 @@ def lag_corrected_differentials(diffs, taus, dt: float, lags, estimate) -> list:
 
 
 def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options: dict | None = None,
-                   lags=None, sigmas=None, weights=None, highpass_hz: float = 0.0) -> AxisIntegration:
+                   lags=None, sigmas=None, weights=None, highpass_hz: float = 0.0,
+                   psd_ceiling=None) -> AxisIntegration:
     """Integrate one axis's differentials of every pair (time synchronisation, method, high-pass).
 
     Parameters
@@ -121,6 +122,9 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
         Relative weight of each pair's line.
     highpass_hz : float
         Cut-off of the high-pass applied to the estimate (0: none).
+    psd_ceiling : (freq, ceiling), optional
+        Upper bound of the prior PSD, for the methods that estimate one
+        (:mod:`restore.knowledge_prior`).
 
     Returns
     -------
@@ -135,7 +139,8 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
         lsq = integration_method("lsq")
         first = lsq.function(diffs, taus, dt, **lsq.data_options(lags=lags, sigmas=sigmas))
         diffs = lag_corrected_differentials(diffs, taus, dt, lags, first)
-    data = spec.data_options(weights=weights, lags=lags, sigmas=sigmas)
+    data = spec.data_options(weights=weights, lags=lags, sigmas=sigmas,
+                             psd_ceiling=None if "psd" in opts else psd_ceiling)
     prior = None
     if spec.reports_spectrum and "psd" not in opts:
         res = integrate(diffs, taus, dt, method=spec.name, **opts, **data, return_details=True)

@@ -210,6 +210,7 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
              "timings": json.dumps(res.timings, sort_keys=True),
              "misregistration": json.dumps(res.misregistration, sort_keys=True),
              "anchored_on_star_tracker": int(res.anchored),
+             "yaw_pitch_coupling": float(res.yaw_pitch_coupling),
              "integration": json.dumps({a: {"pairs": rec.pairs, "method": rec.method, "options": rec.options,
                                             "highpass_hz": rec.highpass_hz, "line_period_s": rec.line_period_s,
                                             "unobservable_rms_rad": rec.unobservable_rms_rad,
@@ -305,7 +306,8 @@ def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult
         sigma={a: _values(ds, f"sigma_{a}") for a in AXES if f"sigma_{a}" in ds.variables},
         flagged={a: _values(ds, f"flagged_{a}", np.int8) != 0 for a in AXES if f"flagged_{a}" in ds.variables},
         noise_scale={a: float(ds[f"sigma_{a}"].attrs.get("noise_scale", 1.0)) for a in AXES
-                     if f"sigma_{a}" in ds.variables})
+                     if f"sigma_{a}" in ds.variables},
+        yaw_pitch_coupling=float(ds.attrs.get("yaw_pitch_coupling", 0.0)))
 
 
 def read_restoration(path: str | Path, *, product_time: np.ndarray | None = None) -> RestorationResult:

@@ -120,7 +120,8 @@ class Restorer:
                                  method=integration_method(s.method).name, integration=records,
                                  anchored=anchored, corrected=corrected,
                                  sigma={a: ps.sigma for a, ps in sigma.items()}, flagged=flagged,
-                                 noise_scale={a: ps.noise_scale for a, ps in sigma.items()})
+                                 noise_scale={a: ps.noise_scale for a, ps in sigma.items()},
+                                 yaw_pitch_coupling=stages.yaw_pitch_coupling(pairs))
 
     def _settings_for(self, product: Product) -> RestorationSettings:
         """The settings the product decides: the "auto" high-pass (from the AOCS knowledge's cut-off) and
@@ -172,6 +173,7 @@ class Restorer:
         order = self._pair_ranking(pairs)
         sens: dict = {}
         records: dict = {}
+        ceilings = stages.knowledge_ceilings(product, knowledge, s)
         t_syn = t_int = 0.0
         for it in range(self._n_iterations(len(pairs))):
             ts = _time.perf_counter()
@@ -187,7 +189,8 @@ class Restorer:
             ti = _time.perf_counter()
             change = 0.0
             for a in s.axes:
-                rec = stages.integrate_differentials(a, used, differentials, estimate[a], s, te, where=product.path)
+                rec = stages.integrate_differentials(a, used, differentials, estimate[a], s, te, where=product.path,
+                                                     psd_ceiling=ceilings.get(a))
                 records[a] = rec
                 new_est = np.where(np.isfinite(rec.increment), np.nan_to_num(estimate[a]) + rec.increment, np.nan)
                 if np.isfinite(new_est).any():

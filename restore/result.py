@@ -123,6 +123,9 @@ class RestorationResult:
     flagged: dict = field(default_factory=dict)
     #: per restored axis: factor the residual check applied to the modelled noise
     noise_scale: dict = field(default_factory=dict)
+    #: along-track motion of a yaw relative to a pitch (tan of the off-nadir roll): the restored pitch is
+    #: pitch + this × the yaw the AOCS knowledge misses (:func:`restore.stages.yaw_pitch_coupling`)
+    yaw_pitch_coupling: float = 0.0
 
     def summary(self) -> str:
         """A few lines for the terminal: pairs, matches, coverage, correction, misregistration, speed."""

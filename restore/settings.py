@@ -41,6 +41,7 @@ class RestorationSettings:
     correction_column_step: int = 64
     min_coverage: float = 0.05
     posterior_samples: int = 8
+    knowledge_prior: bool = True
     max_sigma_px: float | str = "auto"
 
 
@@ -103,6 +104,8 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.correct_images = sec.boolean("correct_images", s.correct_images)
     s.correction_column_step = sec.integer("correction_column_step", s.correction_column_step, ge=1)
     s.min_coverage = sec.number("min_coverage", s.min_coverage, ge=0, le=1)
+    s.knowledge_prior = sec.boolean("knowledge_prior", s.knowledge_prior)
+
     s.posterior_samples = sec.integer("posterior_samples", s.posterior_samples, ge=0, le=1000)
     if s.posterior_samples == 1:
         raise sec.error("posterior_samples", "must be 0 (no predicted σ) or >= 2 Monte Carlo draws, got 1")

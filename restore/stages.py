@@ -21,6 +21,7 @@ from .errors import RestorationError
 from .integration.wiener import spectrum_for_lines
 from .matching import match_points, support_margin
 from .observability import observability
+from .knowledge_prior import knowledge_psd_ceiling
 from .posterior import posterior_sigma
 from .result import IntegrationRecord, PairData
 from .selection import estimate_image_noise, expected_matching_std, select_points_in_blocks
@@ -35,7 +36,7 @@ from .synthesis import (
 
 __all__ = ["auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "select_candidates", "match_candidates",
            "match_pair", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "check_coverage", "correct_images",
+           "knowledge_ceilings", "yaw_pitch_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -352,9 +353,31 @@ def highpass_from_product(setting, product: Product) -> float:
     return HIGHPASS_FRACTION_OF_KNOWLEDGE * float(cutoff)
 
 
+def knowledge_ceilings(product: Product, knowledge: dict, settings: RestorationSettings) -> dict:
+    """Per axis, the ceiling the AOCS knowledge puts on the prior PSD (:mod:`restore.knowledge_prior`).
+
+    Empty when ``knowledge_prior`` is off or the product does not record its
+    knowledge's filter (cut-off, order, rate, noise).
+    """
+    attrs = product.ds.attrs
+    if not settings.knowledge_prior or "knowledge_cutoff_hz" not in attrs or "knowledge_filter_order" not in attrs:
+        return {}
+    dt = product.instrument.line_period_s
+    return {a: knowledge_psd_ceiling(knowledge[a], dt, cutoff_hz=float(attrs["knowledge_cutoff_hz"]),
+                                     order=int(attrs["knowledge_filter_order"]),
+                                     rate_hz=float(attrs["knowledge_rate_hz"]),
+                                     noise_rad=float(attrs["knowledge_noise_urad"]) * RAD_PER_URAD)
+            for a in settings.axes}
+
+
 def integrate_differentials(axis: str, used: list, differentials: list, previous: np.ndarray,
-                            settings: RestorationSettings, line_period_s: float, *, where="") -> IntegrationRecord:
-    """Integrate one axis's differentials of the pairs ``used`` (:func:`integrate_axis`), recorded."""
+                            settings: RestorationSettings, line_period_s: float, *, where="",
+                            psd_ceiling=None) -> IntegrationRecord:
+    """Integrate one axis's differentials of the pairs ``used`` (:func:`integrate_axis`), recorded.
+
+    ``psd_ceiling`` (freq, ceiling): what the AOCS knowledge already knows
+    (:func:`knowledge_ceilings`), for methods that estimate a prior.
+    """
     diffs = [d.diffs[axis] for d in differentials]
     if all(np.all(~np.isfinite(d)) for d in diffs):
         counts = "; ".join(f"{p.name}: {int(np.count_nonzero(p.valid))} valid of {p.valid.size} candidates over "
@@ -369,7 +392,8 @@ def integrate_differentials(axis: str, used: list, differentials: list, previous
     sigmas = [d.sigmas[axis] for d in differentials]
     weights = [d.weight for d in differentials]
     res = integrate_axis(diffs, taus, line_period_s, method=settings.method, options=settings.integration_options,
-                         lags=lags, sigmas=sigmas, weights=weights, highpass_hz=settings.highpass_hz)
+                         lags=lags, sigmas=sigmas, weights=weights, highpass_hz=settings.highpass_hz,
+                         psd_ceiling=psd_ceiling)
     prior = res.spectrum or spectrum_for_lines(diffs, taus, line_period_s)
     obs = observability(prior.freq, prior.psd, prior.noise_std, taus, line_period_s, highpass_hz=settings.highpass_hz)
     return IntegrationRecord(axis=axis, pairs=[p.name for p in used], diffs=np.array(diffs), sigmas=np.array(sigmas),
@@ -378,6 +402,27 @@ def integrate_differentials(axis: str, used: list, differentials: list, previous
                              highpass_hz=settings.highpass_hz, spectrum=res.spectrum, increment=res.theta,
                              previous=np.nan_to_num(previous), unobservable_rms_rad=obs.unobservable_rms_rad,
                              floor_rms_rad=obs.floor_rms_rad)
+
+
+# --------------------------------------------------------------------------- coupled yaw
+def yaw_pitch_coupling(pairs: list) -> float:
+    """How much a yaw moves band B along track, relative to the same pitch: ``Σ ∂l/∂ψ / Σ ∂l/∂θ``.
+
+    At nadir a yaw turns the line about its centre (no mean along-track
+    motion: 0); rolled off nadir by φ it shifts the whole line along track
+    by tan φ × yaw (a pitch by 1 × pitch), the signature of a pitch: across a narrow field the
+    images cannot tell them apart (the turn about the centre moves the line's
+    ends by a few thousandths of a pixel per µrad), so the restored pitch is
+    the along-track line-of-sight motion, pitch + coupling × (yaw the AOCS
+    knowledge misses). Signed: the restored pitch is off by ``coupling × (ψ − ψ_knowledge)``.
+    """
+    num = den = 0.0
+    for p in pairs:
+        if p.sens is None or not len(p.sens):
+            continue
+        num += float(np.nansum(p.sens[:, 0, 2]))
+        den += float(np.nansum(p.sens[:, 0, 1]))
+    return num / den if den else 0.0
 
 
 # --------------------------------------------------------------------------- uncertainty

@@ -846,6 +846,12 @@ def _sample_times(t_start: float, t_end: float, rate_hz: float) -> np.ndarray:
     return t_start + np.arange(n) / rate_hz
 
 
+#: the AOCS knowledge's filter: a Butterworth of this order run forward and backward (zero phase), so that its
+#: gain is ``1 / (1 + (f / f_c)^(2 order))`` (recorded in product.nc: a ground segment knows its AOCS filter)
+KNOWLEDGE_FILTER = "butterworth_zero_phase"
+KNOWLEDGE_FILTER_ORDER = 4
+
+
 def aocs_knowledge(model: AttitudeModel, *, t_start: float, t_end: float, cutoff_hz: float = 10.0,
                    rate_hz: float = 50.0, noise_urad: float = 0.5, seed: int) -> AttitudeSeries:
     """Attitude knowledge from AOCS telemetry.
@@ -885,7 +891,7 @@ def aocs_knowledge(model: AttitudeModel, *, t_start: float, t_end: float, cutoff
     fs = max(20.0 * cutoff_hz, 2.5 * model.max_frequency_hz, 4.0 * rate_hz)
     margin = 5.0 / cutoff_hz
     tg = np.arange(t_start - margin, t_end + margin + 1.0 / fs, 1.0 / fs)
-    sos = butter(4, cutoff_hz, fs=fs, output="sos")
+    sos = butter(KNOWLEDGE_FILTER_ORDER, cutoff_hz, fs=fs, output="sos")
     times = _sample_times(t_start, t_end, rate_hz)
     rng = _rng(seed, _STREAM_KNOWLEDGE)
     noise = rng.standard_normal((3, times.size)) * noise_urad * RAD_PER_URAD

@@ -8,7 +8,7 @@ from typing import Callable
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from reports.metrics import error_stats
+from reports.metrics import YAW_COUPLING_REPORTED, error_stats
 from restore.integration.wiener import spectrum_for_lines
 from restore.observability import observability
 from simsat.units import AXES
@@ -380,6 +380,7 @@ class _AxisBudget:
         rows.append(_stats_row("integration", a, eint, ifov, "integrate(true differentials) − truth"))
         rows.append(_stats_row("total (restored − true)", a, total, ifov, "= measurement + integration"))
         rows += self.band_split_rows(total)
+        rows += self.yaw_coupling_rows(total)
         ser.update({"measurement": emeas, "integration": eint, "total": total})
         return rows
 
@@ -396,6 +397,18 @@ class _AxisBudget:
             out.append({"axis": self.a, "component": comp, "rms_px": v / self.ifov, "p997_px": float("nan"),
                         "rms_urad": v * 1e6, "p997_urad": float("nan"), "n": 0, "note": note})
         return out
+
+    def yaw_coupling_rows(self, total) -> list:
+        """Off nadir, with truth: the part of the pitch error that is yaw seen as pitch, and the rest."""
+        c = float(self.run.restoration.attrs.get("yaw_pitch_coupling", 0.0))
+        if self.a != "pitch" or abs(c) < YAW_COUPLING_REPORTED or "true_yaw" not in self.att:
+            return []
+        missed = self.att["true_yaw"] - self.att["knowledge_yaw"]
+        seen = _centred(np.where(np.isfinite(total), c * missed, np.nan))
+        return [_stats_row("yaw seen as pitch", self.a, seen, self.ifov,
+                           f"{c:.3f} × (true − knowledge yaw): off nadir a yaw moves the line along track like a "
+                           f"pitch; the images cannot tell them apart"),
+                _stats_row("total without it", self.a, total - seen, self.ifov, "total − yaw seen as pitch")]
 
     def band_split_rows(self, total) -> list:
         """With truth: the measured total error inside and outside the unobservable band (its spectrum split)."""

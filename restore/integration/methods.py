@@ -14,6 +14,9 @@ Callers never branch on a method's name: they ask its spec what it can do.
   (``.spectrum`` with ``freq``, ``psd``, ``noise_std``); passed back as
   ``psd=(freq, psd), noise_std=σ`` they make it the fixed linear filter that
   was applied (:meth:`IntegrationMethod.frozen_options`);
+* ``psd_ceiling`` — takes ``psd_ceiling=(freq, ceiling)``, an upper bound of
+  the prior PSD it estimates (what the AOCS knowledge already knows:
+  :mod:`restore.knowledge_prior`);
 * ``gain_option`` — the option holding a fixed regularisation ``k`` of the
   stationary chain gain ``Σ|G_j|² / (Σ|G_j|² + k)``, when the method is that
   filter.
@@ -32,7 +35,7 @@ __all__ = ["IntegrationMethod", "INTEGRATION_METHODS", "DEFAULT_METHOD", "PIPELI
            "register_method"]
 
 #: options the pipeline supplies itself from the data (not settable in a scenario)
-PIPELINE_OPTIONS = frozenset({"weights", "lags", "sigmas", "return_details"})
+PIPELINE_OPTIONS = frozenset({"weights", "lags", "sigmas", "psd_ceiling", "return_details"})
 
 DEFAULT_METHOD = "wiener"
 
@@ -50,6 +53,7 @@ class IntegrationMethod:
     line_lags: bool = False
     line_sigmas: bool = False
     reports_spectrum: bool = False
+    psd_ceiling: bool = False
     gain_option: str | None = None
 
     @property
@@ -65,9 +69,11 @@ class IntegrationMethod:
         return {p.name: p.default for p in sig.parameters.values()
                 if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name not in PIPELINE_OPTIONS}
 
-    def data_options(self, *, weights=None, lags=None, sigmas=None) -> dict:
+    def data_options(self, *, weights=None, lags=None, sigmas=None, psd_ceiling=None) -> dict:
         """The per-line data options this method takes, from those available."""
         out = {}
+        if self.psd_ceiling and psd_ceiling is not None:
+            out["psd_ceiling"] = psd_ceiling
         if self.line_weights and weights is not None:
             out["weights"] = weights
         if self.line_lags and lags is not None:
@@ -92,7 +98,7 @@ def _spec(name, module, function_name, principle, **caps) -> IntegrationMethod:
 INTEGRATION_METHODS: dict[str, IntegrationMethod] = {s.name: s for s in (
     _spec("wiener", "wiener", "integrate_wiener",
           "exact multi-pair Wiener / MAP on the finite record, data-estimated PSD prior, CG",
-          line_weights=True, reports_spectrum=True),
+          line_weights=True, reports_spectrum=True, psd_ceiling=True),
     _spec("wiener_fft", "wiener", "integrate_wiener_fft", "one-shot multi-pair Wiener filter (FFT)"),
     _spec("inverse", "wiener", "integrate_inverse", "pseudo-inverse conj(G) / (|G|² + k)", gain_option="k"),
     _spec("local", "local", "integrate_local", "CNES local integration w = R⁻¹ r"),
@@ -123,7 +129,7 @@ def register_method(name: str, function: Callable, principle: str, **capabilitie
     """Add (or replace) an integration method: ``function(diffs, taus, dt, **options) -> theta``.
 
     ``capabilities`` are the flags of :class:`IntegrationMethod` (``line_weights``,
-    ``line_lags``, ``line_sigmas``, ``reports_spectrum``, ``gain_option``).
+    ``line_lags``, ``line_sigmas``, ``reports_spectrum``, ``psd_ceiling``, ``gain_option``).
     Returns the spec; remove it with ``INTEGRATION_METHODS.pop(name)``.
     """
     spec = IntegrationMethod(name, getattr(function, "__module__", ""), getattr(function, "__name__", name), principle,

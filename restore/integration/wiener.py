@@ -67,6 +67,17 @@ def _psd_on_grid(psd, f: np.ndarray) -> np.ndarray:
     return s
 
 
+def _ceiling_on_grid(ceiling, f: np.ndarray) -> np.ndarray:
+    fc, cc = (np.asarray(x, dtype=np.float64) for x in ceiling)
+    if fc.shape != cc.shape or fc.ndim != 1 or np.any(np.diff(fc) <= 0) or np.any(np.isnan(cc)) or np.any(cc < 0):
+        raise ValueError("psd_ceiling: must be (freq, ceiling) with increasing frequencies and ceilings >= 0")
+    big = np.isinf(cc)
+    out = np.interp(f, fc, np.where(big, 0.0, cc), right=np.inf)
+    # a bin next to an infinite ceiling is unbounded (interpolating towards inf gives inf anyway)
+    out[np.interp(f, fc, big.astype(float)) > 0] = np.inf
+    return out
+
+
 def integrate_inverse(diffs, taus, dt, *, k: float = 0.1, pad_fraction: float = 0.5,
                       max_gap_s: float | None = None) -> np.ndarray:
     """Pseudo-inverse integration with a constant ``k`` (patent's ``H_k``), fused over pairs.
@@ -226,7 +237,7 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
 def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction: float = 0.5,
                      tol: float = 1e-7, maxiter: int = 300, refine: int | None = None,
                      max_gap_s: float | None = None, spectrum_options: dict | None = None,
-                     weights=None, return_details: bool = False):
+                     weights=None, psd_ceiling=None, return_details: bool = False):
     """Exact multi-pair Wiener (MAP) integration on the finite record, by conjugate gradients.
 
     With gaps, the first PSD estimate comes from the gap-free segments only
@@ -260,6 +271,11 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         sample ``n`` of pair ``j`` is ``noise_std_j² / weights_j[n]``, with the
         weights scaled to mean 1 over the pair's valid samples (``noise_std``
         stays the pair's typical level). Non-finite or <= 0 = no weight.
+    psd_ceiling : (freq, ceiling), keyword-only
+        Upper bound of the estimated prior PSD (rad²/Hz, ``inf`` = none), e.g.
+        what the AOCS knowledge already knows
+        (:func:`restore.knowledge_prior.knowledge_psd_ceiling`); ignored when
+        ``psd`` is given. The reported spectrum is the bounded one.
     return_details : bool, keyword-only
         Return a :class:`WienerResult` instead of the array.
 
@@ -293,7 +309,10 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
     spec: SpectralEstimate = estimate_spectrum(D, taus, dt, n_fft=m, noise_std=noise_std, **opts)
     passes = 0 if psd is not None else int(refine)
     grid = None
+    ceiling = None if psd is not None or psd_ceiling is None else _ceiling_on_grid(psd_ceiling, spec.freq)
     for k in range(passes + 1):
+        if ceiling is not None:
+            spec.psd = np.minimum(spec.psd, ceiling)
         S = spec.psd.copy() if psd is None else _psd_on_grid(psd, spec.freq)
         S[0] = 0.0
         if m % 2 == 0:

@@ -148,3 +148,32 @@ def test_drop_sparse_removes_isolated_samples_in_gappy_stretches():
     assert np.isfinite(out[:10]).all() and np.isfinite(out[-5:]).all()
     # half_window 0: unchanged
     np.testing.assert_array_equal(drop_sparse(x, half_window=0), x)
+
+
+@pytest.mark.parametrize("roll_deg", [0.0, 10.0, 20.0, 35.0])
+def test_yaw_moves_a_rolled_line_along_track_by_sin_roll_times_a_pitch(roll_deg):
+    """On a flat plane viewed rolled by φ, a small yaw ψ about the vertical turns the ground point of the line's
+    centre, (0, H tan φ) from the nadir, along track by H tan φ · ψ; a small pitch δ about the cross-track
+    axis moves it by H · δ: the coupling the restoration records is tan φ (0 at nadir)."""
+    from restore.result import PairData
+    from restore.stages import yaw_pitch_coupling
+    from simsat.platform import Platform
+    from simsat.sensor_model import SensorModel, constant_attitude
+    from support.geometry import F, H, TE, V, flat_dem, small_instrument
+
+    inst = small_instrument(pixels=200)
+    roll = np.radians(roll_deg)
+    n = 4000
+    along = np.mean([d.along_m for d in inst.detectors])
+    plat = Platform(altitude_m=H, ground_speed_m_s=V, off_nadir_roll_rad=roll).centred(
+        t_mid_s=0.5 * (n - 1) * TE, along_angle_rad=np.arctan(along / F))
+    sm = SensorModel(platform=plat, instrument=inst, dem=flat_dem(half_x=20000.0, half_y=20000.0),
+                     attitude=constant_attitude(roll, 0.0))
+    cols = np.linspace(0, 199, 21)
+    lines = np.full(cols.size, n / 2)
+    g = sm.direct_location("B1", lines, cols)
+    sens = sm.sensitivities("B0", g)
+    pair = PairData(name="B1/B0", ahead="B1", behind="B0", tau_s=0.0, line_a=lines, col_a=cols,
+                    meas_line_b=lines, meas_col_b=cols, quality=np.ones(cols.size), valid=np.ones(cols.size, bool),
+                    sens=sens)
+    assert abs(yaw_pitch_coupling([pair])) == pytest.approx(np.tan(roll), abs=1e-3)

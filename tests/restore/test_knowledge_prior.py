@@ -1,0 +1,76 @@
+"""The ceiling the AOCS knowledge puts on the prior (restore.knowledge_prior), on analytic cases."""
+import numpy as np
+import pytest
+from scipy.signal import butter, sosfiltfilt
+
+from restore.integration.wiener import integrate_wiener
+from restore.knowledge_prior import knowledge_gain, knowledge_psd_ceiling
+from restore.posterior import simulated_differentials
+
+DT = 4e-4
+
+
+def test_gain_is_that_of_a_zero_phase_butterworth():
+    fs = 1 / DT
+    sos = butter(4, 10.0, fs=fs, output="sos")
+    n = 1 << 16
+    x = np.zeros(n)
+    x[n // 2] = 1.0
+    h = np.abs(np.fft.rfft(sosfiltfilt(sos, x)))
+    f = np.fft.rfftfreq(n, DT)
+    for fk in (2.0, 10.0, 15.0, 30.0):
+        k = np.argmin(np.abs(f - fk))
+        assert h[k] == pytest.approx(knowledge_gain(f[k], 10.0, 4), abs=2e-3)
+    assert knowledge_gain(10.0, 10.0, 4) == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="cutoff_hz"):
+        knowledge_gain(1.0, 0.0, 4)
+
+
+def test_ceiling_of_a_line_well_inside_the_band_is_its_tiny_leakage():
+    """A 1 Hz line known through a 10 Hz AOCS: the knowledge's error there is (1 − G) × the line, ~1e-8 of it."""
+    n = 8000
+    t = np.arange(n) * DT
+    a = 4e-6
+    k = a * np.sin(2 * np.pi * 1.0 * t) * knowledge_gain(1.0, 10.0, 4)
+    f, c = knowledge_psd_ceiling(k, DT, cutoff_hz=10.0, order=4, rate_hz=64.0, noise_rad=0.0)
+    band = (f > 0.5) & (f < 1.5)
+    var_line = 2 * np.sum(c[band]) * (f[1] - f[0])
+    assert var_line == pytest.approx((a * (1 - knowledge_gain(1.0, 10.0, 4))) ** 2 / 2, rel=0.5)
+    assert np.all(np.isinf(c[f > 10.0 * 6]))  # far above the cut-off the knowledge says nothing
+
+
+def test_ceiling_has_the_white_noise_floor():
+    f, c = knowledge_psd_ceiling(np.zeros(4000), DT, cutoff_hz=10.0, order=4, rate_hz=50.0, noise_rad=1e-6)
+    assert c[5] == pytest.approx(1e-12 / 50.0)
+
+
+def test_a_differential_drift_no_longer_becomes_a_record_long_drift_of_the_estimate():
+    """A slow bias of one pair's differentials (as large as the noise per line) beside a 60 Hz line: without
+    the ceiling the estimate books it as a slow attitude drift; with it (AOCS at 10 Hz) it does not."""
+    n = 4000
+    rng = np.random.default_rng(0)
+    taus = [7.4e-3, 14.8e-3, 22.2e-3]
+    t = np.arange(n + 100) * DT
+    theta = 1e-6 * np.sin(2 * np.pi * 60 * t + 0.3)
+    valid = np.ones((3, n), bool)
+    d = simulated_differentials(theta, taus, np.zeros((3, n)), valid, DT) + 1e-7 * rng.standard_normal((3, n))
+    d[2] += 1e-7 * ((np.arange(n) / n) ** 2 - 1 / 3)  # slow systematic error on the longest pair
+    knowledge = 0.3e-6 / 8 * rng.standard_normal(n)  # an AOCS knowledge of no jitter, with its noise
+    ceiling = knowledge_psd_ceiling(knowledge, DT, cutoff_hz=10.0, order=4, rate_hz=64.0, noise_rad=0.3e-6 / 8)
+
+    def slow_error(est):
+        e = est - theta[:n]
+        e -= e.mean()
+        return np.std(np.convolve(e, np.ones(400) / 400, mode="valid"))  # what is left below ~6 Hz
+
+    free = integrate_wiener(list(d), taus, DT)
+    bounded = integrate_wiener(list(d), taus, DT, psd_ceiling=ceiling)
+    assert slow_error(bounded) < 0.1 * slow_error(free)
+    e_b, e_f = bounded - theta[:n], free - theta[:n]
+    assert np.std(e_b) < np.std(e_f)
+
+
+def test_ceiling_is_checked():
+    with pytest.raises(ValueError, match="psd_ceiling"):
+        integrate_wiener([np.random.default_rng(0).standard_normal(100)], [7.4e-3], DT,
+                         psd_ceiling=(np.array([2.0, 1.0]), np.array([1.0, 1.0])))
