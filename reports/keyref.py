@@ -137,6 +137,11 @@ MEANING = {
     "restoration.min_coverage": "least fraction of lines restored for the run to succeed",
     "restoration.knowledge_prior": "bound the estimated prior PSD by what the AOCS knowledge already knows "
                                    "(its recorded filter, rate and noise): nothing restored deep inside its band",
+    "restoration.rematch": "coarse to fine: passes matching again in band B resampled into band A's geometry with "
+                           "the estimate so far; \"auto\": one pass when the estimate moves by more than 0.3 px "
+                           "per line (RMS: large amplitude), else none",
+    "restoration.rematch_search_lines": "search half-range of the rematch, lines [px]",
+    "restoration.rematch_search_columns": "search half-range of the rematch, columns [px]",
     "restoration.posterior_samples": "Monte Carlo draws through the integration for the predicted 1-σ per line "
                                      "(restoration.nc sigma_<axis>); 0: none",
     "restoration.max_sigma_px": "lines whose predicted σ exceeds this [px] are flagged and not restored; \"auto\": "

@@ -283,7 +283,7 @@ def _settings_from(d: dict) -> RestorationSettings:
     s = RestorationSettings()
     for k, v in d.items():
         if hasattr(s, k):
-            setattr(s, k, tuple(v) if k in ("window", "search", "pilot_search", "axes") else v)
+            setattr(s, k, tuple(v) if k in ("window", "search", "pilot_search", "axes", "rematch_search") else v)
     return s
 
 

@@ -87,6 +87,7 @@ class Restorer:
             timings["matching_s"] = _time.perf_counter() - t
             knowledge = dict(zip(AXES, product.knowledge.at(product.time)))
             pairs, records, estimate = self.synthesise_and_integrate(product, pairs, knowledge, timings, bar)
+            pairs, records, estimate = self.rematch(product, pairs, knowledge, records, estimate, timings, bar)
             bar.note("predicted σ (Monte Carlo through the integration)")
             t = _time.perf_counter()
             sigma = stages.predicted_sigma(records, product, s)
@@ -207,6 +208,27 @@ class Restorer:
         for a in AXES:
             if a not in s.axes:
                 estimate[a] = np.zeros(n_lines)
+        return pairs, records, estimate
+
+    def rematch(self, product: Product, pairs: list, knowledge: dict, records: dict, estimate: dict, timings: dict,
+                bar) -> tuple:
+        """Coarse to fine (:mod:`restore.rematch`): match again in B resampled with the estimate so far, then
+        synthesise and integrate again (:func:`stages.rematch_passes` passes).
+
+        Returns (pairs, records, estimate) of the last pass.
+        """
+        s = self.settings
+        passes = stages.rematch_passes(s.rematch, estimate, s.axes, product.pixel_ifov_rad)
+        t = _time.perf_counter()
+        for k in range(passes):
+            bar.note(f"rematch {k + 1}/{passes}: matching again in B resampled with the estimate "
+                     f"(worst pair {stages.valid_fraction(pairs) * 100:.0f} % valid)")
+            attitude = {a: knowledge[a] + np.nan_to_num(estimate[a]) for a in AXES}
+            pairs = stages.rematch_pairs(product, pairs, attitude, s)
+            pairs, records, estimate = self.synthesise_and_integrate(product, pairs, knowledge, {}, bar)
+        if passes:
+            timings["rematch_s"] = _time.perf_counter() - t
+            timings["rematch_passes"] = passes
         return pairs, records, estimate
 
     @staticmethod

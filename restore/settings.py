@@ -42,6 +42,8 @@ class RestorationSettings:
     min_coverage: float = 0.05
     posterior_samples: int = 8
     knowledge_prior: bool = True
+    rematch: int | str = "auto"
+    rematch_search: tuple = (2, 2)
     max_sigma_px: float | str = "auto"
 
 
@@ -105,6 +107,12 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.correction_column_step = sec.integer("correction_column_step", s.correction_column_step, ge=1)
     s.min_coverage = sec.number("min_coverage", s.min_coverage, ge=0, le=1)
     s.knowledge_prior = sec.boolean("knowledge_prior", s.knowledge_prior)
+    rm = sec.raw("rematch", "auto")
+    if rm != "auto" and (isinstance(rm, bool) or not isinstance(rm, int) or not 0 <= rm <= 5):
+        raise sec.error("rematch", f"must be \"auto\" or a number of passes from 0 to 5, got {rm!r}")
+    s.rematch = rm
+    s.rematch_search = (sec.integer("rematch_search_lines", s.rematch_search[0], ge=1, le=16),
+                        sec.integer("rematch_search_columns", s.rematch_search[1], ge=1, le=16))
 
     s.posterior_samples = sec.integer("posterior_samples", s.posterior_samples, ge=0, le=1000)
     if s.posterior_samples == 1:
@@ -120,6 +128,7 @@ def settings_dict(s: RestorationSettings) -> dict:
     d["window"] = list(s.window)
     d["search"] = list(s.search)
     d["axes"] = list(s.axes)
+    d["rematch_search"] = list(s.rematch_search)
     return d
 
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from simsat.attitude import AttitudeSeries
 from simsat.config import ScenarioError
-from simsat.product import Product
+from simsat.product import Product, clamped_attitude
 from simsat.units import RAD_PER_URAD
 
 from .axis_integration import integrate_axis
@@ -23,6 +23,7 @@ from .matching import match_points, support_margin
 from .observability import observability
 from .knowledge_prior import knowledge_psd_ceiling
 from .posterior import posterior_sigma
+from .rematch import rematch_pair
 from .result import IntegrationRecord, PairData
 from .selection import estimate_image_noise, expected_matching_std, select_points_in_blocks
 from .settings import RestorationSettings
@@ -35,7 +36,7 @@ from .synthesis import (
 )
 
 __all__ = ["auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "select_candidates", "match_candidates",
-           "match_pair", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
+           "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
            "knowledge_ceilings", "yaw_pitch_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "check_coverage", "correct_images",
            "attitude_series"]
 
@@ -211,6 +212,44 @@ def match_pair(product: Product, ahead: str, behind: str, settings: RestorationS
     img_b = product.image(behind)
     cand = select_candidates(img_a, img_b.shape, ahead, behind, settings, sm)
     return match_candidates(img_a, img_b, cand, settings)
+
+
+# --------------------------------------------------------------------------- rematch (coarse to fine)
+#: "auto" rematch: one pass when the estimate moves by more than this between consecutive lines (RMS) [px]:
+#: then band B is sheared within a matching window by a good part of a pixel
+REMATCH_RATE_PX_PER_LINE = 0.3
+
+
+def line_rate_px(estimate: dict, axes, pixel_ifov_rad: float) -> float:
+    """RMS change of the estimate from one line to the next, worst restored axis [px per line]."""
+    out = 0.0
+    for a in axes:
+        d = np.diff(np.asarray(estimate[a], dtype=np.float64))
+        d = d[np.isfinite(d)]
+        if d.size:
+            out = max(out, float(np.sqrt(np.mean(d ** 2))) / pixel_ifov_rad)
+    return out
+
+
+def rematch_passes(setting, estimate: dict, axes, pixel_ifov_rad: float) -> int:
+    """Passes of rematching: the number given, or for "auto" one when :func:`line_rate_px` exceeds
+    :data:`REMATCH_RATE_PX_PER_LINE` (large amplitude), else none."""
+    if setting != "auto":
+        return int(setting)
+    return int(line_rate_px(estimate, axes, pixel_ifov_rad) > REMATCH_RATE_PX_PER_LINE)
+
+
+def valid_fraction(pairs: list) -> float:
+    """The worst pair's fraction of valid matches."""
+    return min((float(np.mean(p.valid)) if p.valid.size else 0.0) for p in pairs) if pairs else 0.0
+
+
+def rematch_pairs(product: Product, pairs: list, attitude: dict, settings: RestorationSettings) -> list:
+    """Every pair matched again in B resampled into A's geometry with ``attitude`` (:mod:`restore.rematch`)."""
+    sm = product.sensor_model(attitude=clamped_attitude(attitude_series(product.time, attitude)))
+    return [rematch_pair(p, product.image(p.ahead), product.image(p.behind), sm, window=settings.window,
+                         search=settings.rematch_search, method=settings.match_method,
+                         min_quality=settings.min_quality) for p in pairs]
 
 
 # --------------------------------------------------------------------------- synthesise

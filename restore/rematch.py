@@ -1,0 +1,115 @@
+"""Coarse to fine: match again in band B resampled into band A's geometry with a first estimate.
+
+At large amplitude the attitude differential changes by up to a pixel from one
+line to the next: band B is sheared and stretched with respect to band A
+inside a matching window, the correlation peak blurs, leaves the search area
+or is not a peak at all (a third of the matches fail at 7 px peaks, however
+the search is centred). A first restoration from the matches that did hold
+predicts where B sees the ground of every pixel of A; resampled along that
+prediction, B is A's geometry up to the first estimate's error (a few tenths
+of a pixel, nearly a translation over a window). Matching A against it with a
+small search and mapping the match back through the same prediction gives the
+position in B, to be synthesised like any other match.
+
+:func:`geometry_map` and :func:`resample_to_reference` are pure NumPy/OpenCV;
+:func:`rematch_pair` wires them to a pair.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+from scipy.ndimage import map_coordinates
+
+from .matching import match_points
+from .result import PairData
+
+__all__ = ["geometry_map", "resample_to_reference", "map_back", "rematch_pair", "REMATCH_COLUMN_STEP"]
+
+#: the prediction is computed every this many columns and interpolated in between (it is smooth across a line)
+REMATCH_COLUMN_STEP = 16
+
+
+def geometry_map(sm, ahead: str, behind: str, n_lines: int, n_cols: int, *, column_step: int = REMATCH_COLUMN_STEP
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Where band ``behind`` sees the ground of every pixel of band ``ahead`` under ``sm``'s attitude.
+
+    Returns
+    -------
+    (map_line, map_col) : ndarray (n_lines, n_cols), float32
+        Position in ``behind`` [px] of pixel (line, column) of ``ahead``; NaN
+        where the ground is not seen.
+    """
+    cols = np.unique(np.r_[np.arange(0, n_cols, max(int(column_step), 1)), n_cols - 1]).astype(np.float64)
+    li = np.repeat(np.arange(n_lines, dtype=np.float64), cols.size)
+    ci = np.tile(cols, n_lines)
+    pl, pc = sm.inverse_location(behind, sm.direct_location(ahead, li, ci))
+    full = np.arange(n_cols, dtype=np.float64)
+    out = []
+    for p in (pl.reshape(n_lines, cols.size), pc.reshape(n_lines, cols.size)):
+        # linear interpolation along each line: position of every column between two computed ones
+        k = np.clip(np.searchsorted(cols, full, side="right") - 1, 0, cols.size - 2)
+        w = (full - cols[k]) / (cols[k + 1] - cols[k])
+        out.append(((1 - w) * p[:, k] + w * p[:, k + 1]).astype(np.float32))
+    return out[0], out[1]
+
+
+def resample_to_reference(image_b: np.ndarray, map_line: np.ndarray, map_col: np.ndarray) -> np.ndarray:
+    """Band B resampled (bicubic) at the mapped positions: B in A's geometry; NaN outside B or at no data."""
+    img = np.asarray(image_b, dtype=np.float32)
+    ml = np.nan_to_num(map_line, nan=-1e6).astype(np.float32)
+    mc = np.nan_to_num(map_col, nan=-1e6).astype(np.float32)
+    # a NaN border value would reach inner pixels through the kernel's zero weights (0 × NaN): replicate the
+    # edge and mask what falls outside instead
+    out = cv2.remap(img, mc, ml, interpolation=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+    inside = (ml >= 1) & (ml <= img.shape[0] - 2) & (mc >= 1) & (mc <= img.shape[1] - 2)
+    return np.where(inside, out, np.nan)
+
+
+def map_back(map_line: np.ndarray, map_col: np.ndarray, lines, cols, *, window_lines: int = 1
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Positions in B of fractional positions (lines, cols) of the resampled band (bilinear on the maps).
+
+    A match on raw bands measures the displacement averaged over the window's
+    ``window_lines`` rows (the restoration deconvolves that average,
+    :func:`restore.synthesis.window_compensation`); a match on the resampled
+    band measures only the residual, the rest is the map's. The map is
+    therefore averaged over the same rows, ``mean_r [map(l + r) − r]``, so
+    that a rematched position means what a raw one means.
+    """
+    lines = np.asarray(lines, dtype=np.float64)
+    cols = np.asarray(cols, dtype=np.float64)
+    ok = np.isfinite(lines) & np.isfinite(cols)
+    li, ci = np.where(ok, lines, 0.0), np.where(ok, cols, 0.0)
+    half = (int(window_lines) - 1) // 2
+    out = []
+    for k, m in enumerate((map_line, map_col)):
+        m = np.asarray(m, dtype=np.float64)
+        acc = np.zeros(li.size)
+        for r in range(-half, half + 1):
+            v = map_coordinates(m, np.vstack([li + r, ci]), order=1, mode="nearest")
+            acc += v - (r if k == 0 else 0.0)
+        out.append(np.where(ok, acc / (2 * half + 1), np.nan))
+    return out[0], out[1]
+
+
+def rematch_pair(pair: PairData, image_a: np.ndarray, image_b: np.ndarray, sm, *, window, search, method: str,
+                 min_quality: float) -> PairData:
+    """The pair's candidates matched again in B resampled with ``sm``'s attitude (the first estimate).
+
+    Returns a new :class:`PairData` with the measured positions (in B's own
+    pixels), quality, validity and σ of the new matches; the synthesis of the
+    first pass is dropped.
+    """
+    n_lines, n_cols = image_a.shape
+    ml, mc = geometry_map(sm, pair.ahead, pair.behind, n_lines, n_cols)
+    bp = resample_to_reference(image_b, ml, mc)
+    la, ca = pair.line_a, pair.col_a
+    m = match_points(image_a, bp, la, ca, la, ca, window=window, search=search, method=method,
+                     min_quality=min_quality)
+    lb, cb = map_back(ml, mc, m.line_b, m.col_b, window_lines=window[0])
+    valid = np.asarray(m.valid, bool) & np.isfinite(lb) & np.isfinite(cb)
+    return replace(pair, meas_line_b=lb, meas_col_b=cb, quality=np.asarray(m.quality, float), valid=valid,
+                   std_line=np.asarray(m.std_line, float), std_col=np.asarray(m.std_col, float), pred_line_b=None,
+                   pred_col_b=None, inlier=None, synthesis=None)

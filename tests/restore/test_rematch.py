@@ -1,0 +1,110 @@
+"""Coarse to fine (restore.rematch): resampling B into A's geometry and matching again, on known shears."""
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter, map_coordinates
+
+from restore.matching import match_points
+from restore.rematch import geometry_map, map_back, rematch_pair, resample_to_reference
+from restore.result import PairData
+from restore.stages import line_rate_px, rematch_passes
+
+N, M = 600, 160
+
+
+def _texture(seed=0):
+    rng = np.random.default_rng(seed)
+    return gaussian_filter(rng.standard_normal((N + 40, M + 40)), 1.2)[20:-20, 20:-20] * 50 + 100
+
+
+def _shift(lines, amplitude):
+    """A line shift that changes by up to ~amplitude × 2π / 12 px from one line to the next."""
+    return amplitude * np.sin(2 * np.pi * np.asarray(lines, float) / 12.0)
+
+
+class ShearModel:
+    """A stand-in sensor model: B sees A's pixel (l, c) at (l + s(l), c + s(l) / 2)."""
+
+    def __init__(self, amplitude):
+        self.amplitude = amplitude
+
+    def direct_location(self, detector, lines, cols):
+        return np.stack([np.asarray(lines, float), np.asarray(cols, float)], axis=-1)
+
+    def inverse_location(self, detector, ground):
+        s = _shift(ground[..., 0], self.amplitude)
+        return ground[..., 0] + s, ground[..., 1] + 0.5 * s
+
+
+def _bands(amplitude):
+    a = _texture()
+    # B(l + s(l), c + s/2) = A(l, c): sample A at the inverse of the map (fixed-point iteration)
+    lb, cb = np.meshgrid(np.arange(N, dtype=float), np.arange(M, dtype=float), indexing="ij")
+    la = lb.copy()
+    for _ in range(50):
+        la = lb - _shift(la, amplitude)
+    b = map_coordinates(a, [la, cb - 0.5 * _shift(la, amplitude)], order=3, mode="nearest")
+    return a, b
+
+
+def test_identity_map_gives_back_the_band_and_the_positions():
+    a = _texture()
+    ml, mc = np.meshgrid(np.arange(N, dtype=np.float32), np.arange(M, dtype=np.float32), indexing="ij")
+    out = resample_to_reference(a, ml, mc)
+    inner = (slice(2, -2), slice(2, -2))
+    assert np.allclose(out[inner], a[inner], atol=1e-3)
+    lb, cb = map_back(ml, mc, np.array([10.25, 300.5]), np.array([7.75, 80.0]), window_lines=3)
+    np.testing.assert_allclose(lb, [10.25, 300.5], atol=1e-9)
+    np.testing.assert_allclose(cb, [7.75, 80.0], atol=1e-9)
+
+
+def test_geometry_map_interpolates_between_computed_columns():
+    ml, mc = geometry_map(ShearModel(3.0), "A", "B", N, M, column_step=16)
+    l = np.arange(N)
+    np.testing.assert_allclose(ml[:, 37], l + _shift(l, 3.0), atol=1e-4)
+    np.testing.assert_allclose(mc[:, 37], 37 + 0.5 * _shift(l, 3.0), atol=1e-4)
+
+
+@pytest.mark.parametrize("window", [(1, 31), (3, 31)])
+def test_rematch_recovers_the_positions_of_a_sheared_band(window):
+    """B sheared by up to 0.5 px per line; with the exact map, the rematched positions are B's true ones
+    (averaged over the window's rows, as a raw match measures them) to the interpolation error."""
+    amplitude = 1.0
+    a, b = _bands(amplitude)
+    rng = np.random.default_rng(1)
+    la = rng.uniform(20, N - 20, 400).round()
+    ca = rng.uniform(30, M - 30, 400).round()
+    pair = PairData(name="A/B", ahead="A", behind="B", tau_s=0.0, line_a=la, col_a=ca, meas_line_b=la * np.nan,
+                    meas_col_b=ca * np.nan, quality=la * 0, valid=np.zeros(la.size, bool))
+    again = rematch_pair(pair, a, b, ShearModel(amplitude), window=window, search=(2, 2), method="ncc",
+                         min_quality=0.6)
+    half = (window[0] - 1) // 2
+    true_l = la + np.mean([_shift(la + r, amplitude) for r in range(-half, half + 1)], axis=0)
+    true_c = ca + 0.5 * _shift(la, amplitude)
+    v = again.valid
+    assert v.mean() > 0.98
+    assert np.sqrt(np.mean((again.meas_line_b[v] - true_l[v]) ** 2)) < 0.06
+    assert np.sqrt(np.mean((again.meas_col_b[v] - true_c[v]) ** 2)) < 0.06
+    # the raw match, centred on the same positions, measures the same thing
+    raw = match_points(a, b, la, ca, la, ca, window=window, search=(3, 3), min_quality=0.6)
+    both = v & raw.valid
+    assert np.sqrt(np.mean((again.meas_line_b[both] - raw.line_b[both]) ** 2)) < 0.1
+
+
+def test_map_back_averages_the_map_over_the_window_rows():
+    """A raw match measures the displacement averaged over the window's rows: so does a rematched one."""
+    ml, mc = geometry_map(ShearModel(3.0), "A", "B", N, M)
+    l0 = np.array([100.0])
+    lb, _ = map_back(ml, mc, l0, np.array([50.0]), window_lines=3)
+    expected = np.mean([_shift(l0 + r, 3.0) for r in (-1, 0, 1)]) + l0
+    assert lb[0] == pytest.approx(expected[0], abs=1e-4)
+
+
+def test_auto_rematches_only_at_large_rates():
+    t = np.arange(4000)
+    slow = {"roll": 1e-6 * np.sin(2 * np.pi * t / 60), "pitch": np.zeros(4000)}
+    fast = {"roll": 4e-6 * np.sin(2 * np.pi * t / 20), "pitch": np.zeros(4000)}
+    ifov = 1e-6
+    assert line_rate_px(slow, ("roll", "pitch"), ifov) == pytest.approx(2 * np.pi / 60 / np.sqrt(2), rel=0.01)
+    assert rematch_passes("auto", slow, ("roll", "pitch"), ifov) == 0
+    assert rematch_passes("auto", fast, ("roll", "pitch"), ifov) == 1
+    assert rematch_passes(2, slow, ("roll", "pitch"), ifov) == 2
