@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from reports import bench_integration, bench_matching
+from reports.history import HISTORY_FILE, append_record, make_record
 from reports.metrics import (
     attitude_errors,
     attitude_misregistration,
@@ -249,8 +250,9 @@ def bench_memory(*, scenario: str | None = None, lines: int | None = None,
 
 
 def run_bench(what: str, *, scenario: str | None = None, out: str | None = None, lines: int | None = None,
-              seed: int = 0) -> dict:
-    """Run one benchmark, write its JSON, return the result (with ``_path``)."""
+              seed: int = 0, history: str | Path | None = HISTORY_FILE) -> dict:
+    """Run one benchmark, write its JSON, append its record to the accuracy ``history`` (None: not), return
+    the result (with ``_path`` and ``_history``)."""
     t0 = _time.perf_counter()
     if what == "render":
         result = bench_render(scenario=scenario, lines=lines)
@@ -264,6 +266,8 @@ def run_bench(what: str, *, scenario: str | None = None, out: str | None = None,
         result = bench_memory(scenario=scenario, lines=lines)
     elif what == "robustness":
         result = bench_robustness(lines=lines)
+    elif what == "regression":
+        result = bench_regression(lines=lines)
     else:
         raise ValueError(f"what: unknown benchmark {what!r}")
     result = {"benchmark": what, "result": result, "wall_s": _time.perf_counter() - t0,
@@ -271,6 +275,9 @@ def run_bench(what: str, *, scenario: str | None = None, out: str | None = None,
     path = Path(out) if out else Path("bench") / f"{what}.json"
     atomic_write_json(result, path)
     result["_path"] = str(path)
+    if history is not None:
+        rec = make_record(what, result["result"], settings={"scenario": scenario, "lines": lines, "seed": seed})
+        result["_history"] = str(append_record(rec, history))
     return result
 
 
@@ -326,6 +333,48 @@ def _format_scaling(s: dict) -> list:
 def stress_scenarios() -> dict:
     """Name → path of the stress suite (``scenarios/stress/*.toml``): one condition each, unseen by tuning."""
     return {p.stem: p for p in sorted((SCENARIO_DIR / "stress").glob("*.toml"))}
+
+
+def builtin_scenarios(*, include_full: bool = False) -> dict:
+    """The built-in scenarios (``scenarios/*.toml``) by name; ``phr_full`` (7000 × 7000 × 4) only if asked."""
+    out = {}
+    for p in sorted(SCENARIO_DIR.glob("*.toml")):
+        if p.stem == "phr_full" and not include_full:
+            continue
+        out[p.stem] = p
+    return out
+
+
+def bench_regression(*, lines: int | None = None) -> dict:
+    """Every built-in scenario (not phr_full: minutes of rendering) and the stress suite, each checked against
+    its own ``[scenario.requirement]`` (a failing run is recorded, not fatal)."""
+    runs = []
+    for name, path in {**builtin_scenarios(), **stress_scenarios()}.items():
+        try:
+            e = bench_end_to_end(scenario=str(path), lines=lines, tag="regression")
+            req = load_scenario(str(path)).requirement.get("max_rms_px") or 0.05
+            axes = [a for a in ("roll", "pitch") if a in e["errors"]]
+            worst = max(e["errors"][a]["rms_px"] for a in axes)
+            runs.append({**{k: e[k] for k in ("scenario", "lines", "errors", "coverage", "restore_s", "render_s")},
+                         "file": str(path), "requirement_rms_px": req, "worst_rms_px": worst,
+                         "passed": bool(worst <= req)})
+        except Exception as ex:  # one scenario failing must not sink the suite: say why in its row
+            runs.append({"scenario": name, "file": str(path), "error": f"{type(ex).__name__}: {ex}", "passed": False})
+    return {"runs": runs, "lines": lines, "passed": sum(r["passed"] for r in runs), "total": len(runs)}
+
+
+def _format_regression(r: dict) -> list:
+    out = [f"regression suite: {r['passed']} of {r['total']} scenarios meet their requirement"
+           + (f" ({r['lines']} lines)" if r["lines"] else "")]
+    for row in r["runs"]:
+        if "error" in row:
+            out.append(f"  {row['scenario']:28s} failed: {row['error'][:200]}")
+            continue
+        e = row["errors"]
+        cells = " ".join(f"{a} {e[a]['rms_px']:.4f}" for a in ("roll", "pitch") if a in e)
+        out.append(f"  {row['scenario']:28s} {cells}  ≤ {row['requirement_rms_px']} px: "
+                   f"{'PASS' if row['passed'] else 'FAIL'}")
+    return out
 
 
 def _predicted_rms(res, axis: str) -> float:
@@ -400,6 +449,8 @@ def format_result(what: str, result: dict) -> str:
     lines = []
     if what == "robustness":
         return "\n".join(_format_robustness(r))
+    if what == "regression":
+        return "\n".join(_format_regression(r))
     if what == "memory":
         lines.append(f"peak RSS per process, {r['scenario']} ({r['cpu_count']} cores; scratch runs in {r['scratch']})")
         lines.append(f"  {'lines':>7s}  {'render':>16s}  {'restore':>16s}  {'report':>16s}")

@@ -198,11 +198,26 @@ def cmd_figures(args) -> int:
 
 
 def cmd_bench(args) -> int:
+    if args.what == "compare":
+        from reports import history
+
+        try:
+            records = history.read_history(args.history)
+        except history.HistoryError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        prev, latest, changes = history.compare(records, benchmark=args.benchmark)
+        print(history.format_comparison(prev, latest, changes))
+        return 1 if any(c.regression for c in changes) else 0
     from reports import bench  # matplotlib, Mitsuba: heavy
 
-    result = bench.run_bench(args.what, scenario=args.scenario, out=args.out, lines=args.lines, seed=args.seed)
+    result = bench.run_bench(args.what, scenario=args.scenario, out=args.out, lines=args.lines, seed=args.seed,
+                             history=args.history)
     print(bench.format_result(args.what, result))
-    print(f"\nwrote {result['_path']}")
+    print(f"\nwrote {result['_path']}; appended to the accuracy history {result['_history']} "
+          f"(`simsat bench compare` sets it against the previous run)")
+    if args.what == "regression" and result["result"]["passed"] < result["result"]["total"]:
+        return 1
     return 0
 
 
@@ -270,13 +285,19 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_figures)
 
     s = sub.add_parser("bench", help="benchmarks (results printed and written as JSON)")
-    s.add_argument("what", choices=["render", "restore", "matching", "integration", "memory", "robustness"],
+    s.add_argument("what", choices=["render", "restore", "matching", "integration", "memory", "robustness",
+                                    "regression", "compare"],
                    help="what to measure (memory: peak RSS of render, restore and report at 4 000, 16 000 and "
-                        "50 000 lines, each in its own process)")
+                        "50 000 lines, each in its own process; regression: every built-in and stress scenario "
+                        "against its own requirement, exit 1 if one fails); compare: the last bench record "
+                        "against the previous one with the same settings, exit 1 on a regression")
     s.add_argument("--scenario", default=None, help="scenario (render/restore; default phr_cmg)")
     s.add_argument("--lines", type=int, default=None, help="override acquisition.lines (memory: measure this length only)")
     s.add_argument("--seed", type=int, default=0, help="scenario seed of the bench runs (default: %(default)s)")
     s.add_argument("--out", default=None, help="JSON output file (default bench/<what>.json)")
+    s.add_argument("--history", default="bench/history.jsonl",
+                   help="accuracy history every bench appends to, and compare reads (default: %(default)s)")
+    s.add_argument("--benchmark", default=None, help="compare: which benchmark's records (default: the last run)")
     s.set_defaults(func=cmd_bench)
     return p
 
