@@ -221,6 +221,26 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_study(args) -> int:
+    from reports.study.runner import run_study
+    from reports.study.spec import load_study
+
+    spec = load_study(args.study)
+    out = Path(args.out) if args.out else Path("studies") / "out" / spec.name
+    n = len(spec.points())
+    where = args.scheduler or f"a local cluster of {args.workers or os.cpu_count()} worker processes"
+    if not args.quiet:
+        print(f"study {spec.name}: {len(spec.designs())} designs × {len(spec.seeds)} seeds = {n} points "
+              f"({spec.level} level) on {where} → {out}", file=sys.stderr)
+    res = run_study(spec, out, scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
+    failed = [r for r in res["rows"] if r.get("error")]
+    print(f"study {spec.name}: {len(res['rows'])} of {res['total']} points in the table ({res['computed']} computed "
+          f"now, {len(failed)} failed)")
+    for k, p in res["paths"].items():
+        print(f"  {k}: {p}")
+    return 1 if failed else 0
+
+
 # --------------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="simsat", description="Push-broom LOS jitter simulator and restoration testbed")
@@ -283,6 +303,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-monte-carlo", action="store_true", help="analytic curves only")
     s.add_argument("--quiet", action="store_true", help=quiet_help)
     s.set_defaults(func=cmd_figures)
+
+    s = sub.add_parser("study", help="a trade study: sweeps and Monte Carlo over scenario keys, on Dask (resumable)")
+    s.add_argument("study", help="STUDY.toml (see reports/study/spec.py and studies/*.toml)")
+    s.add_argument("--out", default=None, help="output directory (default studies/out/<name>); a study started "
+                                              "again there computes only the missing points")
+    s.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="run on an existing Dask scheduler (default: a local cluster on this machine's cores)")
+    s.add_argument("--workers", type=int, default=None, help="local cluster: worker processes (default: cores)")
+    s.add_argument("--quiet", action="store_true", help=quiet_help)
+    s.set_defaults(func=cmd_study)
 
     s = sub.add_parser("bench", help="benchmarks (results printed and written as JSON)")
     s.add_argument("what", choices=["render", "restore", "matching", "integration", "memory", "robustness",
