@@ -241,6 +241,33 @@ def cmd_study(args) -> int:
     return 1 if failed else 0
 
 
+def cmd_optimise(args) -> int:
+    from reports.optimise import optimise_layout
+    from reports.study.evaluate import calibrate_noise
+    from simsat.scenario import load_scenario
+
+    sc = load_scenario(args.scenario)
+    out = Path(args.out) if args.out else Path("runs") / f"optimise_{sc.name}"
+    noise = args.noise_px
+    if noise is None:
+        print(f"optimise: calibrating the matching noise on a rendered run of {sc.name} ...", file=sys.stderr)
+        noise = calibrate_noise(args.scenario, {}, out / "calibration_run")["noise_px"]
+    res = optimise_layout(args.scenario, out, noise_px=noise, seeds=tuple(range(args.seeds)),
+                          max_spread_s=None if args.max_spread_ms is None else args.max_spread_ms * 1e-3,
+                          confirm=not args.no_confirm, progress=not args.quiet)
+    for tag in ("reference", "best"):
+        r = res[tag]
+        line = (f"{tag:9s} τ = {' / '.join(f'{x:.1f}' for x in r['tau_ms'])} ms: predicted roll "
+                f"{r['predicted_px']['roll']:.4f}, pitch {r['predicted_px']['pitch']:.4f} px")
+        if "rendered_px" in r:
+            line += (f"; rendered {r['rendered_px']['roll']:.4f} / {r['rendered_px']['pitch']:.4f} px (× "
+                     f"{r['rendered_over_predicted']['roll']:.2f} / {r['rendered_over_predicted']['pitch']:.2f})")
+        print(line)
+    for p in res["_paths"]:
+        print(f"  wrote {p}")
+    return 0
+
+
 # --------------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="simsat", description="Push-broom LOS jitter simulator and restoration testbed")
@@ -313,6 +340,19 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--workers", type=int, default=None, help="local cluster: worker processes (default: cores)")
     s.add_argument("--quiet", action="store_true", help=quiet_help)
     s.set_defaults(func=cmd_study)
+
+    s = sub.add_parser("optimise", help="the three-band layout (τ set) that minimises the predicted restored error")
+    s.add_argument("--scenario", default="phr_cmg", help="the jitter spectrum, geometry and reference layout "
+                                                         "(default: %(default)s)")
+    s.add_argument("--noise-px", type=float, default=None,
+                   help="matching noise per line and pair [px] (default: calibrated on a rendered run)")
+    s.add_argument("--max-spread-ms", type=float, default=None,
+                   help="largest delay between the first and the last band [ms] (default: the focal-plane height)")
+    s.add_argument("--seeds", type=int, default=5, help="Monte Carlo seeds of the prediction (default: %(default)s)")
+    s.add_argument("--no-confirm", action="store_true", help="do not render the best and the reference layouts")
+    s.add_argument("--out", default=None, help="output directory (default runs/optimise_<scenario>)")
+    s.add_argument("--quiet", action="store_true", help=quiet_help)
+    s.set_defaults(func=cmd_optimise)
 
     s = sub.add_parser("bench", help="benchmarks (results printed and written as JSON)")
     s.add_argument("what", choices=["render", "restore", "matching", "integration", "memory", "robustness",

@@ -69,7 +69,7 @@ def study_client(scheduler: str | None = None, workers: int | None = None):
             client.close()
         return
     n = int(workers or os.cpu_count() or 1)
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                       silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
         yield client
 
