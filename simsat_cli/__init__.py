@@ -269,6 +269,48 @@ def cmd_optimise(args) -> int:
 
 
 # --------------------------------------------------------------------------- parser
+def _add_study_and_bench(sub, quiet_help: str) -> None:
+    """The parsers of ``study``, ``optimise`` and ``bench``."""
+    s = sub.add_parser("study", help="a trade study: sweeps and Monte Carlo over scenario keys, on Dask (resumable)")
+    s.add_argument("study", help="STUDY.toml (see reports/study/spec.py and studies/*.toml)")
+    s.add_argument("--out", default=None, help="output directory (default studies/out/<name>); a study started "
+                                              "again there computes only the missing points")
+    s.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="run on an existing Dask scheduler (default: a local cluster on this machine's cores)")
+    s.add_argument("--workers", type=int, default=None, help="local cluster: worker processes (default: cores)")
+    s.add_argument("--quiet", action="store_true", help=quiet_help)
+    s.set_defaults(func=cmd_study)
+
+    s = sub.add_parser("optimise", help="the three-band layout (τ set) that minimises the predicted restored error")
+    s.add_argument("--scenario", default="phr_cmg", help="the jitter spectrum, geometry and reference layout "
+                                                         "(default: %(default)s)")
+    s.add_argument("--noise-px", type=float, default=None,
+                   help="matching noise per line and pair [px] (default: calibrated on a rendered run)")
+    s.add_argument("--max-spread-ms", type=float, default=None,
+                   help="largest delay between the first and the last band [ms] (default: the focal-plane height)")
+    s.add_argument("--seeds", type=int, default=5, help="Monte Carlo seeds of the prediction (default: %(default)s)")
+    s.add_argument("--no-confirm", action="store_true", help="do not render the best and the reference layouts")
+    s.add_argument("--out", default=None, help="output directory (default runs/optimise_<scenario>)")
+    s.add_argument("--quiet", action="store_true", help=quiet_help)
+    s.set_defaults(func=cmd_optimise)
+
+    s = sub.add_parser("bench", help="benchmarks (results printed and written as JSON)")
+    s.add_argument("what", choices=["render", "restore", "matching", "integration", "memory", "robustness",
+                                    "regression", "compare"],
+                   help="what to measure (memory: peak RSS of render, restore and report at 4 000, 16 000 and "
+                        "50 000 lines, each in its own process; regression: every built-in and stress scenario "
+                        "against its own requirement, exit 1 if one fails); compare: the last bench record "
+                        "against the previous one with the same settings, exit 1 on a regression")
+    s.add_argument("--scenario", default=None, help="scenario (render/restore; default phr_cmg)")
+    s.add_argument("--lines", type=int, default=None, help="override acquisition.lines (memory: measure this length only)")
+    s.add_argument("--seed", type=int, default=0, help="scenario seed of the bench runs (default: %(default)s)")
+    s.add_argument("--out", default=None, help="JSON output file (default bench/<what>.json)")
+    s.add_argument("--history", default="bench/history.jsonl",
+                   help="accuracy history every bench appends to, and compare reads (default: %(default)s)")
+    s.add_argument("--benchmark", default=None, help="compare: which benchmark's records (default: the last run)")
+    s.set_defaults(func=cmd_bench)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="simsat", description="Push-broom LOS jitter simulator and restoration testbed")
     p.add_argument("--version", action="version", version=f"simsat {__version__}")
@@ -331,44 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quiet", action="store_true", help=quiet_help)
     s.set_defaults(func=cmd_figures)
 
-    s = sub.add_parser("study", help="a trade study: sweeps and Monte Carlo over scenario keys, on Dask (resumable)")
-    s.add_argument("study", help="STUDY.toml (see reports/study/spec.py and studies/*.toml)")
-    s.add_argument("--out", default=None, help="output directory (default studies/out/<name>); a study started "
-                                              "again there computes only the missing points")
-    s.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                   help="run on an existing Dask scheduler (default: a local cluster on this machine's cores)")
-    s.add_argument("--workers", type=int, default=None, help="local cluster: worker processes (default: cores)")
-    s.add_argument("--quiet", action="store_true", help=quiet_help)
-    s.set_defaults(func=cmd_study)
-
-    s = sub.add_parser("optimise", help="the three-band layout (τ set) that minimises the predicted restored error")
-    s.add_argument("--scenario", default="phr_cmg", help="the jitter spectrum, geometry and reference layout "
-                                                         "(default: %(default)s)")
-    s.add_argument("--noise-px", type=float, default=None,
-                   help="matching noise per line and pair [px] (default: calibrated on a rendered run)")
-    s.add_argument("--max-spread-ms", type=float, default=None,
-                   help="largest delay between the first and the last band [ms] (default: the focal-plane height)")
-    s.add_argument("--seeds", type=int, default=5, help="Monte Carlo seeds of the prediction (default: %(default)s)")
-    s.add_argument("--no-confirm", action="store_true", help="do not render the best and the reference layouts")
-    s.add_argument("--out", default=None, help="output directory (default runs/optimise_<scenario>)")
-    s.add_argument("--quiet", action="store_true", help=quiet_help)
-    s.set_defaults(func=cmd_optimise)
-
-    s = sub.add_parser("bench", help="benchmarks (results printed and written as JSON)")
-    s.add_argument("what", choices=["render", "restore", "matching", "integration", "memory", "robustness",
-                                    "regression", "compare"],
-                   help="what to measure (memory: peak RSS of render, restore and report at 4 000, 16 000 and "
-                        "50 000 lines, each in its own process; regression: every built-in and stress scenario "
-                        "against its own requirement, exit 1 if one fails); compare: the last bench record "
-                        "against the previous one with the same settings, exit 1 on a regression")
-    s.add_argument("--scenario", default=None, help="scenario (render/restore; default phr_cmg)")
-    s.add_argument("--lines", type=int, default=None, help="override acquisition.lines (memory: measure this length only)")
-    s.add_argument("--seed", type=int, default=0, help="scenario seed of the bench runs (default: %(default)s)")
-    s.add_argument("--out", default=None, help="JSON output file (default bench/<what>.json)")
-    s.add_argument("--history", default="bench/history.jsonl",
-                   help="accuracy history every bench appends to, and compare reads (default: %(default)s)")
-    s.add_argument("--benchmark", default=None, help="compare: which benchmark's records (default: the last run)")
-    s.set_defaults(func=cmd_bench)
+    _add_study_and_bench(sub, quiet_help)
     return p
 
 
