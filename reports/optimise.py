@@ -78,10 +78,11 @@ def _tau_per_mm(sc) -> tuple[float, list]:
 
 
 def layout_overrides(sc, tau1_s: float, tau2_s: float) -> dict:
-    """Overrides placing the three visible bands ``τ1`` and ``τ1 + τ2`` behind the first one."""
+    """Overrides placing the three visible bands ``τ1`` and ``τ1 + τ2`` behind the first one, centred on the
+    focal plane."""
     k, names = _tau_per_mm(sc)
     dets = [d.name for d in sc.instrument.detectors]
-    top = sc.instrument.detector(names[0]).along_m * 1e3
+    top = 0.5 * (tau1_s + tau2_s) / k
     pos = {names[0]: top, names[1]: top - tau1_s / k, names[2]: top - (tau1_s + tau2_s) / k}
     return {"instrument": {"detectors": {dets.index(n): {"along_track_mm": float(v)} for n, v in pos.items()}}}
 
@@ -126,7 +127,7 @@ def optimise_layout(base: str, out_dir: str | Path, *, noise_px: float, max_spre
     k, names = _tau_per_mm(sc)
     ref_taus = sorted(p[2] for p in scenario_pairs(sc))
     ref = (ref_taus[0], ref_taus[-1] - ref_taus[0])
-    spread = max_spread_s if max_spread_s is not None else sc.instrument.focal_plane_height_m * 1e3 * k
+    spread = max_spread_s if max_spread_s is not None else 0.98 * sc.instrument.focal_plane_height_m * 1e3 * k
     say(f"jitter spectrum of {sc.name} (attitude − AOCS knowledge, {len(seeds[:3])} seeds)")
     psd = jitter_psd(base, seeds=seeds[:3])
     t0 = _time.perf_counter()
