@@ -5,15 +5,15 @@ and the AOCS knowledge come from the scenario's own models (same seed, same
 series as a render), the pairs and their delays τ from its focal plane and
 viewing geometry, and each pair's per-line differential of the part the
 images restore, ``e(t + τ) − e(t)`` with ``e = θ − knowledge``, gets white
-matching noise of ``σ`` px per line. It is integrated by the restoration's
+matching noise of ``σ`` px per line (one per axis). It is integrated by the restoration's
 own integration step (:func:`restore.axis_integration.integrate_axis`, with
 the scenario's method and options, the "auto" high-pass and the knowledge
 prior) and scored with the accuracy metric.
 
 The noise ``σ`` is calibrated on a rendered run of the base scenario
 (:func:`calibrate_noise`): the per-line noise the Wiener integration
-estimated there from the measured differentials (median over pairs and
-axes). What this level leaves out: matching failures (gaps, outliers) and the
+estimated there from the measured differentials (median over pairs, per
+axis). What this level leaves out: matching failures (gaps, outliers) and the
 synthesis's model errors, which grow at large amplitude and off nadir.
 
 ``rendered`` — the full chain: render, restore, score, in a run directory of
@@ -66,8 +66,11 @@ def _stats(err: np.ndarray, ifov: float) -> tuple[float, float]:
     return float(np.sqrt(np.mean(e ** 2)) / ifov), float(np.percentile(np.abs(e), 99.7) / ifov)
 
 
-def differential_point(base: str, overrides: dict, *, noise_px: float, seed: int) -> dict:
-    """Figures of one point at the differential level (see the module's docstring)."""
+def differential_point(base: str, overrides: dict, *, noise_px: float | dict, seed: int) -> dict:
+    """Figures of one point at the differential level (see the module's docstring).
+
+    ``noise_px``: per-line matching noise [px], one number or one per axis (``{"roll": .., "pitch": ..}``).
+    """
     t0 = _time.perf_counter()
     sc = load_scenario(base, overrides=overrides)
     settings = restoration_settings(sc.section("restoration"))
@@ -91,7 +94,8 @@ def differential_point(base: str, overrides: dict, *, noise_px: float, seed: int
             th_later = model.evaluate(t + tau)[("roll", "pitch", "yaw").index(axis)]
             kn_later = kn.at(np.clip(t + tau, kn.time[0], kn.time[-1]))[("roll", "pitch", "yaw").index(axis)]
             d = (th_later - kn_later) - e_now
-            diffs.append(d + noise_px * ifov * rng.standard_normal(t.size))
+            sigma = float(noise_px[axis]) if isinstance(noise_px, dict) else float(noise_px)
+            diffs.append(d + sigma * ifov * rng.standard_normal(t.size))
         ceiling = knowledge_psd_ceiling(know[axis], dt, cutoff_hz=kc.cutoff_hz, order=KNOWLEDGE_FILTER_ORDER,
                                         rate_hz=kc.rate_hz, noise_rad=kc.noise_urad * RAD_PER_URAD) \
             if settings.knowledge_prior else None
@@ -105,7 +109,8 @@ def differential_point(base: str, overrides: dict, *, noise_px: float, seed: int
             obs = observability(res.spectrum.freq, res.spectrum.psd, res.spectrum.noise_std, taus, dt, highpass_hz=hp)
             row[f"{axis}_unobservable_px"] = obs.unobservable_rms_rad / ifov
             row[f"{axis}_floor_px"] = obs.floor_rms_rad / ifov
-    row["noise_px"] = float(noise_px)
+    for axis in AXES_RESTORED:
+        row[f"{axis}_noise_px"] = float(noise_px[axis]) if isinstance(noise_px, dict) else float(noise_px)
     row["evaluate_s"] = _time.perf_counter() - t0
     return row
 
@@ -156,14 +161,14 @@ def calibrate_noise(base: str, overrides: dict, run_dir: Path) -> dict:
             "rms_px": {a: row.get(f"{a}_rms_px") for a in AXES_RESTORED}, "overrides": overrides}
 
 
-def evaluate_point(level: str, base: str, point: dict, *, noise_px: float | None, work_dir: str) -> dict:
+def evaluate_point(level: str, base: str, point: dict, *, noise_px: float | dict | None, work_dir: str) -> dict:
     """One row: the point's key, design, seed, figures and timings, or its error (a failed point does not stop
     the study). Runs on a Dask worker."""
     row = {"key": point["key"], "seed": point["seed"], **{f"design.{k}": _scalar(v) for k, v in point["design"].items()}}
     t0 = _time.perf_counter()
     try:
         if level == "differential":
-            row.update(differential_point(base, point["overrides"], noise_px=float(noise_px), seed=point["seed"]))
+            row.update(differential_point(base, point["overrides"], noise_px=noise_px, seed=point["seed"]))
         else:
             row.update(rendered_point(base, point["overrides"], run_dir=Path(work_dir) / "runs" / point["key"]))
         row["error"] = ""

@@ -74,20 +74,29 @@ def study_client(scheduler: str | None = None, workers: int | None = None):
         yield client
 
 
-def _noise(spec: StudySpec, out_dir: Path, client) -> float | None:
+def _per_axis(cal: dict):
+    """The calibrated noise per axis (the median over axes where one is missing)."""
+    per = cal.get("per_axis") or {}
+    if per and all(v is not None for v in per.values()):
+        return {a: float(v) for a, v in per.items()}
+    return float(cal["noise_px"])
+
+
+def _noise(spec: StudySpec, out_dir: Path, client):
     if spec.level != "differential":
         return None
     if spec.noise_px != "calibrate":
         return float(spec.noise_px)
     path = out_dir / "calibration.json"
     if path.exists():
-        return float(json.loads(path.read_text())["noise_px"])
+        return _per_axis(json.loads(path.read_text()))
     over = {"acquisition": {"lines": spec.lines}} if spec.lines else {}
     print(f"study: calibrating the matching noise on a rendered run of {spec.base} ...", file=sys.stderr, flush=True)
     cal = client.submit(calibrate_noise, spec.base, over, out_dir / "calibration_run", pure=False).result()
     atomic_write_json(cal, path)
-    print(f"study:   {cal['noise_px']:.4f} px per line and pair", file=sys.stderr, flush=True)
-    return float(cal["noise_px"])
+    print(f"study:   {', '.join(f'{a} {v:.4f}' for a, v in cal['per_axis'].items())} px per line and pair",
+          file=sys.stderr, flush=True)
+    return _per_axis(cal)
 
 
 def run_study(spec: StudySpec, out_dir: str | Path, *, scheduler: str | None = None, workers: int | None = None,

@@ -16,7 +16,7 @@
     # several keys moving together: keys = [...] and values = [[v_key1, v_key2, ...], ...]
 
     [study.noise]                 # differential level: matching noise per line and pair
-    differential_noise_px = "calibrate"   # or a number [px]: see reports.study.differential
+    differential_noise_px = "calibrate"   # or a number [px]: see reports.study.evaluate
 
 Designs are the Cartesian product of the axes; every design runs with every
 seed; a point is (design, seed) and has a stable key, so a study that stops

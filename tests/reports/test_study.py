@@ -164,3 +164,10 @@ def test_row_store_never_writes_a_key_twice(tmp_path):
     st = RowStore(tmp_path)
     assert st.write({"key": "a", "v": 1}) and not st.write({"key": "a", "v": 2})
     assert st.rows(["a"]) == [{"key": "a", "v": 1}]
+
+
+def test_the_noise_can_be_given_per_axis():
+    row = differential_point("phr_cmg", {"acquisition": {"lines": 800}}, noise_px={"roll": 0.02, "pitch": 0.3},
+                             seed=0)
+    assert (row["roll_noise_px"], row["pitch_noise_px"]) == (0.02, 0.3)
+    assert row["pitch_rms_px"] > 2 * row["roll_rms_px"]
