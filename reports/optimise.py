@@ -174,9 +174,9 @@ def _plot(scr: dict, result: dict, path: Path) -> None:
     im = ax.pcolormesh(ms, ms, scr["floor_px"].T, shading="nearest", cmap="viridis_r",
                        norm=matplotlib.colors.LogNorm())
     fig.colorbar(im, ax=ax, label="Wiener floor, worst axis [px]")
-    for r, marker, label in ((result["reference"], "s", "reference"), (result["best"], "*", "best (predicted)")):
+    for r, marker, label in ((result["reference"], "s", "reference"), (result["best"], "*", "best")):
         ax.plot(r["tau_ms"][0], r["tau_ms"][1], marker=marker, color="red", ms=12 if marker == "*" else 8,
-                ls="none", label=f"{label}: {r['worst_px']:.4f} px")
+                ls="none", label=f"{label}: {r['worst_px']:.4f} px predicted (differential level, worst axis)")
     ax.set_xlabel("τ1 (first to second band) [ms]")
     ax.set_ylabel("τ2 (second to third band) [ms]")
     ax.set_title(f"{result['scenario']}: detector layouts, noise {result['noise_px']:.3f} px per line", fontsize=9)

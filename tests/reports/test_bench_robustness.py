@@ -12,3 +12,29 @@ def test_robustness_table_rows_and_verdicts():
     assert "low_snr" in text and "0.0300" in text and "0.0600" in text and "FAIL (> 0.05 px)" in text
     assert "0.001/0.002" in text and "0.010/0.020" in text
     assert "off_nadir" in text and "failed: ScenarioError: scene.dem: too small" in text
+
+
+def test_robustness_table_gives_predicted_sigma_and_the_yaw_split():
+    row = {"scenario": "off_nadir", "errors": {a: {"rms_px": r, "p997_px": 3 * r, "knowledge_rms_px": 0.7}
+                                               for a, r in (("roll", 0.1), ("pitch", 0.45))},
+           "coverage": {"roll": 0.99, "pitch": 0.99}, "passed": False, "requirement_rms_px": 0.05,
+           "unobservable_rms_px": {"roll": 0.001, "pitch": 0.002}, "floor_rms_px": {"roll": 0.01, "pitch": 0.02},
+           "predicted_rms_px": {"roll": 0.025, "pitch": 0.03}, "actual_over_predicted": {"roll": 4.0, "pitch": 15.0},
+           "pitch_without_yaw_coupling_rms_px": 0.13, "yaw_pitch_coupling": 0.364}
+    text = "\n".join(_format_robustness({"rows": [row], "lines": None}))
+    assert "0.025/0.030" in text and "4.00/15.00" in text
+    assert "0.364 × missed yaw" in text and "0.1300 px RMS" in text
+
+
+def test_regression_table_counts_and_verdicts():
+    from reports.bench import _format_regression
+
+    runs = [{"scenario": "phr_cmg", "errors": {"roll": {"rms_px": 0.025}, "pitch": {"rms_px": 0.027}},
+             "requirement_rms_px": 0.05, "passed": True},
+            {"scenario": "stress_off_nadir", "errors": {"roll": {"rms_px": 0.1}, "pitch": {"rms_px": 0.46}},
+             "requirement_rms_px": 0.05, "passed": False},
+            {"scenario": "broken", "error": "ScenarioError: x", "passed": False}]
+    text = "\n".join(_format_regression({"runs": runs, "lines": None, "passed": 1, "total": 3}))
+    assert "1 of 3 scenarios meet their requirement" in text
+    assert "phr_cmg" in text and "PASS" in text and "stress_off_nadir" in text and "FAIL" in text
+    assert "broken" in text and "failed: ScenarioError: x" in text
