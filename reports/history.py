@@ -69,6 +69,16 @@ def _errors_figures(prefix: str, errors: dict) -> dict:
     return out
 
 
+def _run_figures(prefix: str, e: dict) -> dict:
+    """Per-axis errors, coverage and restore time of one scenario's run (a regression or robustness row)."""
+    out = _errors_figures(prefix, e.get("errors"))
+    for a, v in (e.get("coverage") or {}).items():
+        out[f"{prefix}{a}.coverage"] = float(v)
+    if "restore_s" in e:
+        out[prefix + "restore_s"] = float(e["restore_s"])
+    return out
+
+
 def figures_of(what: str, result: dict) -> dict:
     """The flat figures of a benchmark result (``run_bench``'s ``result``): ``{name: number}``."""
     r = result
@@ -80,24 +90,11 @@ def figures_of(what: str, result: dict) -> dict:
                 out.update(_errors_figures(f"{key}.", e.get("errors")))
                 if "restore_s" in e:
                     out[f"{key}.restore_s"] = float(e["restore_s"])
-    elif what == "regression":
-        for e in r.get("runs", []):
+    elif what in ("regression", "robustness"):
+        for e in r.get("runs" if what == "regression" else "rows", []):
             if "error" in e:
                 continue
-            p = f"{e['scenario']}."
-            out.update(_errors_figures(p, e.get("errors")))
-            if "restore_s" in e:
-                out[p + "restore_s"] = float(e["restore_s"])
-    elif what == "robustness":
-        for row in r.get("rows", []):
-            if "error" in row:
-                continue
-            p = f"{row['scenario']}."
-            out.update(_errors_figures(p, row.get("errors")))
-            for a, v in row.get("coverage", {}).items():
-                out[f"{p}{a}.coverage"] = float(v)
-            if "restore_s" in row:
-                out[p + "restore_s"] = float(row["restore_s"])
+            out.update(_run_figures(f"{e['scenario']}.", e))
     elif what == "render":
         m = r.get("main", {})
         for k in ("rays_per_s", "ratio_to_ceiling", "render_wall_s"):

@@ -35,16 +35,17 @@ from .synthesis import (
     window_compensation,
 )
 
-__all__ = ["auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "select_candidates", "match_candidates",
+__all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
            "knowledge_ceilings", "yaw_pitch_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "check_coverage", "correct_images",
            "attitude_series"]
 
 
 # --------------------------------------------------------------------------- pairs, select, match
-def auto_pairs(product: Product) -> list[tuple[str, str]]:
-    """All pairs of the visible bands (most correlated), ordered ahead/behind."""
-    dets = list(product.instrument.detectors)
+def visible_pairs(detectors) -> list[tuple[str, str]]:
+    """All (ahead, behind) pairs of the visible bands (most correlated; every band if fewer than two are
+    visible), skipping bands at the same along-track position."""
+    dets = list(detectors)
     vis = [d for d in dets if d.band in ("blue", "green", "red")]
     use = vis if len(vis) >= 2 else dets
     pairs = []
@@ -54,6 +55,12 @@ def auto_pairs(product: Product) -> list[tuple[str, str]]:
                 continue
             ahead, behind = (a, b) if a.along_m > b.along_m else (b, a)
             pairs.append((ahead.name, behind.name))
+    return pairs
+
+
+def auto_pairs(product: Product) -> list[tuple[str, str]]:
+    """All pairs of the visible bands (most correlated), ordered ahead/behind (:func:`visible_pairs`)."""
+    pairs = visible_pairs(product.instrument.detectors)
     if not pairs:
         raise RestorationError("no band pair with different along-track positions: differentials are impossible")
     return pairs

@@ -33,7 +33,7 @@ from restore.axis_integration import integrate_axis
 from restore.knowledge_prior import knowledge_psd_ceiling
 from restore.observability import observability
 from restore.settings import restoration_settings
-from restore.stages import HIGHPASS_FRACTION_OF_KNOWLEDGE
+from restore.stages import HIGHPASS_FRACTION_OF_KNOWLEDGE, visible_pairs
 from simsat.attitude import KNOWLEDGE_FILTER_ORDER
 from simsat.scenario import load_scenario
 from simsat.units import RAD_PER_URAD
@@ -44,18 +44,8 @@ AXES_RESTORED = ("roll", "pitch")
 
 
 def scenario_pairs(sc) -> list[tuple[str, str, float]]:
-    """(ahead, behind, τ [s]) of every pair of visible bands at different along-track positions."""
-    dets = list(sc.instrument.detectors)
-    vis = [d for d in dets if d.band in ("blue", "green", "red")]
-    use = vis if len(vis) >= 2 else dets
-    out = []
-    for i, a in enumerate(use):
-        for b in use[i + 1:]:
-            if a.along_m == b.along_m:
-                continue
-            ahead, behind = (a, b) if a.along_m > b.along_m else (b, a)
-            out.append((ahead.name, behind.name, float(sc.delay_s(ahead.name, behind.name))))
-    return out
+    """(ahead, behind, τ [s]) of the pairs the restoration uses by default (:func:`restore.stages.visible_pairs`)."""
+    return [(a, b, float(sc.delay_s(a, b))) for a, b in visible_pairs(sc.instrument.detectors)]
 
 
 def _stats(err: np.ndarray, ifov: float) -> tuple[float, float]:
