@@ -171,3 +171,11 @@ def test_the_noise_can_be_given_per_axis():
                              seed=0)
     assert (row["roll_noise_px"], row["pitch_noise_px"]) == (0.02, 0.3)
     assert row["pitch_rms_px"] > 2 * row["roll_rms_px"]
+
+
+def test_a_rendered_point_scores_the_full_chain_and_removes_its_run(tmp_path):
+    row = evaluate_point("rendered", "tiny", {"key": "abc", "seed": 0, "design": {"x": 1.0}, "overrides": {}},
+                         noise_px=None, work_dir=str(tmp_path))
+    assert row["error"] == "" and row["design.x"] == 1.0
+    assert 0 < row["roll_rms_px"] < row["roll_knowledge_rms_px"] and row["render_s"] > 0 and row["restore_s"] > 0
+    assert not (tmp_path / "runs" / "abc").exists()
