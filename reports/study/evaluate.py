@@ -77,15 +77,14 @@ def differential_point(base: str, overrides: dict, *, noise_px: float | dict, se
     row: dict = {"pairs": ",".join(f"{a}/{b}" for a, b, _ in pairs), "taus_ms": ",".join(f"{x * 1e3:.3f}" for x in taus)}
     truth = dict(zip(("roll", "pitch", "yaw"), model.evaluate(t)))
     know = dict(zip(("roll", "pitch", "yaw"), kn.at(t)))
-    for k, axis in enumerate(AXES_RESTORED):
+    # what the images restore, e = attitude − knowledge, at t + τ of every pair (all axes at once)
+    later = [np.asarray(model.evaluate(t + tau)) - np.asarray(kn.at(np.clip(t + tau, kn.time[0], kn.time[-1])))
+             for tau in taus]
+    for axis in AXES_RESTORED:
+        k = ("roll", "pitch", "yaw").index(axis)
         e_now = truth[axis] - know[axis]
-        diffs = []
-        for tau in taus:
-            th_later = model.evaluate(t + tau)[("roll", "pitch", "yaw").index(axis)]
-            kn_later = kn.at(np.clip(t + tau, kn.time[0], kn.time[-1]))[("roll", "pitch", "yaw").index(axis)]
-            d = (th_later - kn_later) - e_now
-            sigma = float(noise_px[axis]) if isinstance(noise_px, dict) else float(noise_px)
-            diffs.append(d + sigma * ifov * rng.standard_normal(t.size))
+        sigma = float(noise_px[axis]) if isinstance(noise_px, dict) else float(noise_px)
+        diffs = [(e_later[k] - e_now) + sigma * ifov * rng.standard_normal(t.size) for e_later in later]
         ceiling = knowledge_psd_ceiling(know[axis], dt, cutoff_hz=kc.cutoff_hz, order=KNOWLEDGE_FILTER_ORDER,
                                         rate_hz=kc.rate_hz, noise_rad=kc.noise_urad * RAD_PER_URAD) \
             if settings.knowledge_prior else None
