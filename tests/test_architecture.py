@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-LAYERS = {"simsat": 0, "restore": 1, "reports": 2, "simsat_cli": 3}
+LAYERS = {"simsat": 0, "restore": 1, "navigation": 1, "reports": 2, "simsat_cli": 3}
 
 
 def _modules() -> dict:
