@@ -16,7 +16,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from .ins import NavState, mechanise
-from .kalman import BA_, BG_, N_STATES, P_, TH_, V_, ins_error_dynamics, kf_update
+from .kalman import BA_, BG_, N_STATES, P_, SA_, SG_, TH_, V_, ins_error_dynamics, kf_update
 from .measurement import AidingSettings, sequence_measurement
 from .rotations import exp_so3
 
@@ -64,17 +64,19 @@ def _initial_covariance(init: InitialErrors, imu_si: dict) -> np.ndarray:
     q[TH_] = (np.array([init.attitude_mrad, init.attitude_mrad, init.heading_mrad]) * 1e-3) ** 2
     q[BA_] = imu_si["accel_bias"] ** 2 + 1e-12
     q[BG_] = imu_si["gyro_bias"] ** 2 + 1e-18
+    q[SA_] = imu_si["accel_scale"] ** 2 + 1e-14
+    q[SG_] = imu_si["gyro_scale"] ** 2 + 1e-14
     return np.diag(q)
 
 
-def _propagate(P, p_chunk_R, dv, dt, step, imu_si):
+def _propagate(P, p_chunk_R, dv, dtheta, dt, step, imu_si):
     """Covariance over a chunk, ``step`` IMU samples at a time."""
     n = len(dv)
     for k in range(0, n, step):
         m = min(step, n - k)
         f_w = p_chunk_R[k] @ (dv[k:k + m].sum(0) / (m * dt))
         F, Q = ins_error_dynamics(f_w, p_chunk_R[k], m * dt, accel_vrw=imu_si["accel_vrw"],
-                                  gyro_arw=imu_si["gyro_arw"])
+                                  gyro_arw=imu_si["gyro_arw"], omega_body=dtheta[k:k + m].sum(0) / (m * dt))
         P = F @ P @ F.T + Q
     return 0.5 * (P + P.T)
 
@@ -120,7 +122,7 @@ def run_seed(flight, dtheta, dv, sequences: list, camera, ref, dem, imu_model, *
     rec_step = max(int(round(1.0 / (record_hz * dt))), 1)
     prop_step = max(int(round(1.0 / (propagation_hz * dt))), 1)
     P = _initial_covariance(init, imu_si)
-    b_a, b_g = np.zeros(3), np.zeros(3)
+    b_a, b_g, s_a, s_g = np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3)
     cur = s0
     k0 = 0
     n = len(flight.t)
@@ -129,12 +131,12 @@ def run_seed(flight, dtheta, dv, sequences: list, camera, ref, dem, imu_model, *
     updates = []
     stops = [int(s.frame_index[-1]) for s in sequences] + [n - 1]
     for u, k_end in enumerate(stops):
-        cdth = mth[k0:k_end] - b_g * dt
-        cdv = mdv[k0:k_end] - b_a * dt
+        cdth = (mth[k0:k_end] - b_g * dt) / (1.0 + s_g)
+        cdv = (mdv[k0:k_end] - b_a * dt) / (1.0 + s_a)
         p, v, R = mechanise(cur, cdth, cdv, dt)
         aided[k0:k_end + 1] = p
         P_start = P
-        P = _propagate(P, R, cdv, dt, prop_step, imu_si)
+        P = _propagate(P, R, cdv, cdth, dt, prop_step, imu_si)
         # σ over the chunk: interpolate the variance linearly in time (recorded at 1 Hz only)
         w = np.linspace(0, 1, k_end - k0 + 1)[:, None]
         sig[k0:k_end + 1] = np.sqrt((1 - w) * np.diag(P_start)[:3] + w * np.diag(P)[:3])
@@ -155,10 +157,13 @@ def run_seed(flight, dtheta, dv, sequences: list, camera, ref, dem, imu_model, *
             if gated is not None:
                 z, H, Rm, used = gated
                 x, P, y, S = kf_update(np.zeros(N_STATES), P, z, H, Rm)
-                rec.update(used=used, nis=float(y @ np.linalg.solve(S, y)), nis_dof=len(y))
+                rec.update(used=used, nis=float(y @ np.linalg.solve(S, y)), nis_dof=len(y),
+                           matched_ref=np.array(m.matched_ref).reshape(-1, 4))
                 cur = NavState(cur.t, cur.p - x[P_], cur.v - x[V_], exp_so3(-x[TH_]) @ cur.R)
                 b_a = b_a + x[BA_]
                 b_g = b_g + x[BG_]
+                s_a = s_a + x[SA_]
+                s_g = s_g + x[SG_]
                 aided[k_end] = cur.p
         e = aided[k_end] - flight.p[k_end]
         rec["nees"] = float(e @ np.linalg.solve(P[P_, P_], e))

@@ -107,7 +107,10 @@ def ransac_homography_lines(seg1: np.ndarray, seg2: np.ndarray, *, threshold_px:
     rng = rng if rng is not None else np.random.default_rng(0)
     l2 = segment_lines(seg2)
     best = np.zeros(n, bool)
-    for _ in range(iterations if n > 4 else 1):
+    needed = iterations if n > 4 else 1
+    k = 0
+    while k < needed:
+        k += 1
         idx = rng.choice(n, 4, replace=False)
         try:
             H = fit_homography_lines(seg1[idx], seg2[idx])
@@ -118,6 +121,9 @@ def ransac_homography_lines(seg1: np.ndarray, seg2: np.ndarray, *, threshold_px:
         inl = np.abs(line_distances(l2, map_segments(H, seg1))).max(1) < threshold_px
         if inl.sum() > best.sum():
             best = inl
+            # adaptive stop: enough samples for a 99 % chance of one all-inlier draw
+            w = best.sum() / n
+            needed = min(needed, int(np.ceil(np.log(0.01) / np.log(max(1 - w ** 4, 1e-12)))) + 1)
     if best.sum() < 4:
         return None, best
     H = fit_homography_lines(seg1[best], seg2[best])

@@ -34,26 +34,21 @@ class Line3D:
         return d / np.linalg.norm(d)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], -1)
+
+
 def backprojection_planes(K: np.ndarray, segs: np.ndarray, poses: list[CameraPose]):
     """Unit world normals (n, 3) and offsets (n,) of the planes ``n·X = d`` through each view's segment."""
     segs = np.asarray(segs, dtype=np.float64).reshape(-1, 4)
-    p = np.column_stack([segs[:, :2], np.ones(len(segs))])
-    q = np.column_stack([segs[:, 2:], np.ones(len(segs))])
-    lines = np.cross(p, q)
-    nrm = np.stack([pose.R_wc @ (K.T @ l) for pose, l in zip(poses, lines)])
+    one = np.ones(len(segs))
+    lines = _cross(np.column_stack([segs[:, :2], one]), np.column_stack([segs[:, 2:], one]))
+    R = np.stack([pose.R_wc for pose in poses])
+    c = np.stack([pose.c for pose in poses])
+    nrm = np.einsum("nij,nj->ni", R, lines @ K)           # R_wc Kᵀ l
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-    d = np.einsum("ij,ij->i", nrm, np.stack([pose.c for pose in poses]))
-    return nrm, d
-
-
-def _ray_line_param(c: np.ndarray, r: np.ndarray, p0: np.ndarray, u: np.ndarray) -> float:
-    """Parameter ``s`` on the line ``p0 + s u`` closest to the ray ``c + t r``."""
-    w = p0 - c
-    b = u @ r
-    den = 1.0 - b * b
-    if den < 1e-12:
-        return float(-(w @ u))
-    return float((b * (w @ r) - (w @ u)) / den)
+    return nrm, np.einsum("ij,ij->i", nrm, c)
 
 
 def reconstruct_line(K: np.ndarray, segs: np.ndarray, poses: list[CameraPose]) -> Line3D | None:
@@ -67,29 +62,33 @@ def reconstruct_line(K: np.ndarray, segs: np.ndarray, poses: list[CameraPose]) -
     cond = float(sv[1] / sv[0]) if len(sv) > 1 else 0.0
     if cond < 1e-6:
         return None
+    R = np.stack([pose.R_wc for pose in poses])
+    c = np.stack([pose.c for pose in poses])
     # a point: the planes plus u·p = u·c₀ (the point of the line nearest the first centre's plane ⊥ u)
     A = np.vstack([nrm, u])
-    rhs = np.concatenate([d, [u @ poses[0].c]])
+    rhs = np.concatenate([d, [u @ c[0]]])
     p0 = np.linalg.lstsq(A, rhs, rcond=None)[0]
-    Kinv = np.linalg.inv(K)
-    lo, hi = [], []
-    for pose, s in zip(poses, segs):
-        ss = []
-        for e in (s[:2], s[2:]):
-            r = pose.R_wc @ (Kinv @ np.array([e[0], e[1], 1.0]))
-            ss.append(_ray_line_param(pose.c, r / np.linalg.norm(r), p0, u))
-        lo.append(min(ss))
-        hi.append(max(ss))
-    s0, s1 = float(np.median(lo)), float(np.median(hi))
-    a, b = p0 + s0 * u, p0 + s1 * u
+    # endpoints: where the rays through the observed endpoints pass closest to the line (all views at once)
+    n = len(segs)
+    pix = np.concatenate([np.column_stack([segs[:, :2], np.ones(n)]), np.column_stack([segs[:, 2:], np.ones(n)])])
+    rays = np.einsum("nij,nj->ni", np.concatenate([R, R]), pix @ np.linalg.inv(K).T)
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    cc = np.concatenate([c, c])
+    w = p0 - cc
+    b = rays @ u
+    den = 1.0 - b * b
+    wu, wr = w @ u, np.einsum("ij,ij->i", w, rays)
+    s = np.where(den < 1e-12, -wu, (b * wr - wu) / np.where(den < 1e-12, 1.0, den))
+    s0 = float(np.median(np.minimum(s[:n], s[n:])))
+    s1 = float(np.median(np.maximum(s[:n], s[n:])))
+    a, bb = p0 + s0 * u, p0 + s1 * u
     # re-projection check: distance of each observed endpoint to the projected 3-D line (px)
-    res = []
-    for pose, s in zip(poses, segs):
-        xa = K @ (pose.R_cw @ (a - pose.c))
-        xb = K @ (pose.R_cw @ (b - pose.c))
-        if xa[2] <= 0 or xb[2] <= 0:
-            return None
-        l = np.cross(xa, xb)
-        l /= max(np.hypot(l[0], l[1]), 1e-12)
-        res += [l @ np.array([s[0], s[1], 1.0]), l @ np.array([s[2], s[3], 1.0])]
-    return Line3D(a, b, float(np.sqrt(np.mean(np.square(res)))), cond)
+    Rt = np.swapaxes(R, 1, 2)
+    xa = np.einsum("ij,nj->ni", K, np.einsum("nij,nj->ni", Rt, a - c))
+    xb = np.einsum("ij,nj->ni", K, np.einsum("nij,nj->ni", Rt, bb - c))
+    if (xa[:, 2] <= 0).any() or (xb[:, 2] <= 0).any():
+        return None
+    lines = _cross(xa, xb)
+    lines /= np.maximum(np.hypot(lines[:, 0], lines[:, 1]), 1e-12)[:, None]
+    res = np.concatenate([np.einsum("ij,ij->i", lines, pix[:n]), np.einsum("ij,ij->i", lines, pix[n:])])
+    return Line3D(a, bb, float(np.sqrt(np.mean(np.square(res)))), cond)

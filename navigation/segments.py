@@ -21,6 +21,9 @@ def segment_angles(seg: np.ndarray) -> np.ndarray:
 class SegmentExtractor:
     """Line segments of an 8-bit or float image (LSD, refined), longer than ``min_length_px``.
 
+    Coordinates follow the camera model's convention: pixel ``i`` spans
+    ``[i, i + 1)``, its centre at ``i + ½`` (LSD's own output is shifted by ½).
+
     Float images are scaled to 8 bits by their 0.5–99.5 percentiles. At most
     ``max_segments`` (the longest) are kept, so that a cluttered frame costs
     the tracker a bounded time.
@@ -41,7 +44,8 @@ class SegmentExtractor:
         lines = self._lsd.detect(img)[0]
         if lines is None:
             return np.zeros((0, 4))
-        seg = lines.reshape(-1, 4).astype(np.float64)
+        # LSD puts pixel centres at integer coordinates; simsat's cameras at half-integers (pixel i spans [i, i+1))
+        seg = lines.reshape(-1, 4).astype(np.float64) + 0.5
         length = segment_lengths(seg)
         seg = seg[length >= self.min_length_px]
         length = length[length >= self.min_length_px]

@@ -268,6 +268,10 @@ def run_bench(what: str, *, scenario: str | None = None, out: str | None = None,
         result = bench_robustness(lines=lines)
     elif what == "regression":
         result = bench_regression(lines=lines)
+    elif what == "navigation":
+        from . import bench_navigation
+
+        result = bench_navigation.bench_navigation(scenario=scenario, seeds=lines)
     else:
         raise ValueError(f"what: unknown benchmark {what!r}")
     result = {"benchmark": what, "result": result, "wall_s": _time.perf_counter() - t0,
@@ -449,6 +453,10 @@ def format_result(what: str, result: dict) -> str:
     lines = []
     if what == "robustness":
         return "\n".join(_format_robustness(r))
+    if what == "navigation":
+        from .bench_navigation import format_navigation
+
+        return "\n".join(format_navigation(r))
     if what == "regression":
         return "\n".join(_format_regression(r))
     if what == "memory":

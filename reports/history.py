@@ -47,10 +47,11 @@ class HistoryError(RuntimeError):
 def _lower_is_better(name: str) -> bool | None:
     """True for errors and durations, False for coverage and throughputs, None for neither."""
     leaf = name.rsplit(".", 1)[-1]
-    if leaf.endswith(("rms_px", "p997_px", "rms_urad", "p997_urad")) or leaf in ("wall_s",) or \
+    if leaf.endswith(("rms_px", "p997_px", "rms_urad", "p997_urad", "_m")) or leaf in ("wall_s",) or \
             (leaf.endswith("_s") and not leaf.endswith("per_s")):
         return True
-    if leaf in ("coverage", "valid_fraction") or leaf.endswith("per_s"):
+    if leaf in ("coverage", "valid_fraction", "improvement_median", "nees_inside_fraction") or \
+            leaf.endswith("per_s"):
         return False
     return None
 
@@ -95,6 +96,13 @@ def figures_of(what: str, result: dict) -> dict:
             if "error" in e:
                 continue
             out.update(_run_figures(f"{e['scenario']}.", e))
+    elif what == "navigation":
+        sm = r.get("summary", {})
+        out["navigation.final_horizontal_p95_m"] = float(sm["final_horizontal_m"]["p95"])
+        out["navigation.final_horizontal_median_m"] = float(sm["final_horizontal_m"]["median"])
+        out["navigation.improvement_median"] = float(sm["improvement_median"])
+        out["navigation.nees_inside_fraction"] = float(sm["nees_inside_fraction"])
+        out["navigation.detection_tracking_s"] = float(r["detection_tracking"]["total_ms"]) / 1e3
     elif what == "render":
         m = r.get("main", {})
         for k in ("rays_per_s", "ratio_to_ceiling", "render_wall_s"):

@@ -38,7 +38,7 @@ __all__ = ["SIMSAT_FILES", "DERIVED_FILES", "RunDirError", "RunLock", "is_simsat
            "clean_stale_parts", "install_files", "REPORT_MANIFEST", "content_id", "check_consistency", "read_ids"]
 
 #: File names simsat writes in a run directory (the report is a directory).
-SIMSAT_FILES = ("product.nc", "truth.nc", "run.json", "restoration.nc", "corrected.nc", "report")
+SIMSAT_FILES = ("product.nc", "truth.nc", "run.json", "restoration.nc", "corrected.nc", "report", "navigation.nc")
 #: Outputs derived from ``product.nc``: stale once the product is re-rendered.
 DERIVED_FILES = ("restoration.nc", "corrected.nc", "report")
 LOCK_NAME = ".simsat.lock"

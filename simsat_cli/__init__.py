@@ -28,7 +28,7 @@ from restore.pipeline import restore_run
 from simsat import __version__
 from simsat.config import ScenarioError
 from simsat.product import ProductError, atomic_write_json
-from simsat.rundir import REPORT_MANIFEST, RunLock, check_consistency, read_ids
+from simsat.rundir import REPORT_MANIFEST, RunLock, check_consistency, prepare_output_dir, read_ids
 from simsat.scenario import builtin_scenarios, load_scenario
 from simsat.simulate import simulate
 
@@ -211,13 +211,42 @@ def cmd_bench(args) -> int:
         return 1 if any(c.regression for c in changes) else 0
     from reports import bench  # matplotlib, Mitsuba: heavy
 
-    result = bench.run_bench(args.what, scenario=args.scenario, out=args.out, lines=args.lines, seed=args.seed,
+    result = bench.run_bench(args.what, scenario=args.scenario, out=args.out,
+                             lines=args.seeds if args.what == "navigation" else args.lines, seed=args.seed,
                              history=args.history)
     print(bench.format_result(args.what, result))
     print(f"\nwrote {result['_path']}; appended to the accuracy history {result['_history']} "
           f"(`simsat bench compare` sets it against the previous run)")
     if args.what == "regression" and result["result"]["passed"] < result["result"]["total"]:
         return 1
+    return 0
+
+
+def cmd_navigate(args) -> int:
+    from navigation.io import read_navigation, summarise, write_navigation
+    from navigation.run import NavigationRun
+    from navigation.scenario import load_navigation_scenario
+
+    sc = load_navigation_scenario(args.scenario, overrides=_parse_set(args.set))
+    out = Path(args.out) if args.out else Path("runs") / sc.name
+    prepare_output_dir(out, force=args.force)
+    seeds = list(range(args.seeds)) if args.seeds else None
+    with RunLock(out, "navigate"):
+        res = NavigationRun(sc, progress=not args.quiet).run(seeds=seeds, scheduler=args.scheduler,
+                                                             workers=args.workers)
+        write_navigation(res, out)
+        report = None
+        if not args.no_report:
+            from reports.navigation_report import make_navigation_report
+
+            report = make_navigation_report(out)
+    s = summarise(read_navigation(out))
+    f = s["final_horizontal_m"]
+    print(f"wrote {out}/navigation.nc" + (f" and {report}" if report else ""))
+    print(f"{sc.name}: {s['seeds']} seeds over {s['distance_km']:.0f} km — final horizontal error median "
+          f"{f['median']:.1f} m, p95 {f['p95']:.1f} m (unaided median {s['unaided_final_horizontal_m']['median']:.0f} m,"
+          f" {s['improvement_median']:.0f}× better); fixes on {100 * s['fixes_fraction']:.0f} % of updates; "
+          f"NEES inside its bounds on {100 * s['nees_inside_fraction']:.0f} % of updates")
     return 0
 
 
@@ -294,9 +323,24 @@ def _add_study_and_bench(sub, quiet_help: str) -> None:
     s.add_argument("--quiet", action="store_true", help=quiet_help)
     s.set_defaults(func=cmd_optimise)
 
+    s = sub.add_parser("navigate", help="the forward-camera INS aiding system: render the flight, run the Monte "
+                                        "Carlo of aided and unaided INS, write navigation.nc and its report")
+    s.add_argument("scenario", help="navigation scenario: a built-in name (nav_default, nav_degraded, nav_tiny) "
+                                    "or a .toml path")
+    s.add_argument("--out", default=None, help="run directory (default runs/<name>)")
+    s.add_argument("--seeds", type=int, default=None, help="number of Monte Carlo seeds (default: navigation.seeds)")
+    s.add_argument("--workers", type=int, default=None, help="local Dask worker processes (default: cores; 1: "
+                                                             "in this process)")
+    s.add_argument("--scheduler", default=None, help="run the seeds on an existing Dask scheduler (tcp://HOST:PORT)")
+    s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario key")
+    s.add_argument("--no-report", action="store_true", help="skip the HTML report")
+    s.add_argument("--force", action="store_true", help="write into a non-empty directory that is not a run")
+    s.add_argument("--quiet", action="store_true", help="no progress bars")
+    s.set_defaults(func=cmd_navigate)
+
     s = sub.add_parser("bench", help="benchmarks (results printed and written as JSON)")
     s.add_argument("what", choices=["render", "restore", "matching", "integration", "memory", "robustness",
-                                    "regression", "compare"],
+                                    "regression", "navigation", "compare"],
                    help="what to measure (memory: peak RSS of render, restore and report at 4 000, 16 000 and "
                         "50 000 lines, each in its own process; regression: every built-in and stress scenario "
                         "against its own requirement, exit 1 if one fails); compare: the last bench record "
@@ -308,6 +352,7 @@ def _add_study_and_bench(sub, quiet_help: str) -> None:
     s.add_argument("--history", default="bench/history.jsonl",
                    help="accuracy history every bench appends to, and compare reads (default: %(default)s)")
     s.add_argument("--benchmark", default=None, help="compare: which benchmark's records (default: the last run)")
+    s.add_argument("--seeds", type=int, default=None, help="navigation: Monte Carlo seeds (default: the scenario's)")
     s.set_defaults(func=cmd_bench)
 
 

@@ -9,7 +9,7 @@ from navigation.flight import fly, plan_route, true_increments
 from navigation.homography import (fit_homography_lines, map_segments, plane_homography, ransac_homography_lines)
 from navigation.imu import ImuModel
 from navigation.ins import NavState, ins_step, mechanise
-from navigation.kalman import KalmanFilter, ins_error_dynamics, kf_predict, kf_update
+from navigation.kalman import N_STATES, KalmanFilter, ins_error_dynamics, kf_predict, kf_update
 from navigation.reconstruction import reconstruct_line
 from navigation.rotations import body_to_world, exp_so3, log_so3
 
@@ -112,7 +112,7 @@ def test_kalman_sequential_updates_equal_the_batch_solution():
 def test_ins_error_dynamics_predicts_a_bias_drift():
     # velocity error from an accelerometer bias state: δv = R b t, δp = R b t² / 2
     F, Q = ins_error_dynamics(np.array([0, 0, 9.8]), np.eye(3), 0.01, accel_vrw=0.0, gyro_arw=0.0)
-    x = np.zeros(15)
+    x = np.zeros(N_STATES)
     x[9] = 0.02
     for _ in range(1000):
         x = F @ x

@@ -14,14 +14,13 @@ need simsat importable.
 from __future__ import annotations
 
 import json
-import logging
-import os
 import sys
-from contextlib import contextmanager
 from dataclasses import asdict
 from pathlib import Path
 
 from tqdm import tqdm
+
+from simsat.cluster import dask_client
 
 from simsat.product import atomic_write_bytes, atomic_write_json
 
@@ -56,22 +55,7 @@ class RowStore:
         return [json.loads(p.read_text(encoding="utf-8")) for p in paths if p.exists()]
 
 
-@contextmanager
-def study_client(scheduler: str | None = None, workers: int | None = None):
-    """A Dask client: on ``scheduler`` (an address), else on a new local cluster of ``workers`` processes."""
-    from distributed import Client, LocalCluster
-
-    if scheduler:
-        client = Client(scheduler, timeout="20s")
-        try:
-            yield client
-        finally:
-            client.close()
-        return
-    n = int(workers or os.cpu_count() or 1)
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
-        yield client
+study_client = dask_client
 
 
 def _per_axis(cal: dict):
