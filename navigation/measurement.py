@@ -39,6 +39,7 @@ class AidingSettings:
     line_sigma_px: float = 0.4
     map_sigma_m: float = 2.0
     min_lines: int = 5
+    common_sigma_m: float = 1.0
     tol_m: float = 6.0
     gate_sigmas: float = 4.0
 
@@ -152,6 +153,9 @@ def sequence_measurement(camera: PinholeCamera, segments: list, frames_p: np.nda
             return m
         J[:, k] = (rk - r0) / steps[k]
     R = _measurement_noise(camera, obs, poses, mm.pairs, ref, dem, s)
+    # model error common to the whole sequence (raster edges, mesh vs DEM, shared detector biases): the
+    # reconstruction as a whole may be offset by common_sigma_m in each axis, as a position error would
+    R = R + s.common_sigma_m ** 2 * (J[:, 0:3] @ J[:, 0:3].T)
     m.z, m.H, m.R = -r0, J, R
     m.matched_ref = [ref.segments[j] for _, j in mm.pairs]
     return m

@@ -69,7 +69,7 @@ class NavigationRun:
     def sequence_indices(self) -> list[np.ndarray]:
         """IMU sample indices of the frames of every aiding sequence."""
         sc, f = self.sc, self.flight
-        step = int(round(sc.imu.rate_hz / sc.frame_rate_hz))
+        step = int(round(sc.imu.rate_hz / sc.frame_rate_hz)) * sc.frame_step
         out = []
         t = sc.first_s
         while True:

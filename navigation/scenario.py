@@ -54,6 +54,7 @@ class NavigationScenario:
     imu: ImuModel
     interval_s: float
     frames: int
+    frame_step: int
     first_s: float
     aiding: AidingSettings
     map_sigma_m: float
@@ -191,9 +192,11 @@ def _parse(data: dict) -> NavigationScenario:
     a = root.section("aiding")
     interval = a.number("interval_s", 10.0, gt=0.5)
     frames = a.integer("frames", 8, ge=3, le=200)
+    frame_step = a.integer("frame_step", 3, ge=1, le=100)
     first = a.number("first_s", interval, ge=0.0)
     aid = AidingSettings(min_views=a.integer("min_views", 5, ge=2), line_sigma_px=a.number("line_sigma_px", 0.4, gt=0.0),
                          map_sigma_m=0.0, min_lines=a.integer("min_lines", 5, ge=3),
+                         common_sigma_m=a.number("common_sigma_m", 1.0, ge=0.0),
                          max_range_m=a.number("max_range_m", 5000.0, gt=100.0))
     if aid.min_views > frames:
         raise a.error("min_views", f"must be <= aiding.frames ({frames}), got {aid.min_views}")
@@ -219,6 +222,6 @@ def _parse(data: dict) -> NavigationScenario:
     return NavigationScenario(name=name, seed=seed, seeds=seeds, length_m=length_m, speed_mps=speed, agl_m=agl,
                               turns=turns, max_bank_deg=bank, relief_m=relief, dem_resolution_m=dem_res,
                               roughness=rough, world=world, camera=camera, frame_rate_hz=fps, sensor=sensor, imu=imu,
-                              interval_s=interval, frames=frames, first_s=first, aiding=aid, map_sigma_m=map_sigma,
+                              interval_s=interval, frames=frames, frame_step=frame_step, first_s=first, aiding=aid, map_sigma_m=map_sigma,
                               map_bias_m=bias, map_keep_fraction=keep, initial=init, degraded=degraded,
                               requirement=req, source=data)

@@ -91,6 +91,23 @@ def clip_segments_to_box(seg: np.ndarray, box) -> tuple[np.ndarray, np.ndarray]:
     return out[keep], keep
 
 
+def _road_polygons(roads: list, half_width: float) -> list:
+    """Each road as quads (its legs offset by ± half the width) and octagons at its bends (round joins).
+
+    Filled polygons keep the exact width; a thick polyline would round it to whole texels.
+    """
+    out = []
+    for pl in roads:
+        d = np.diff(pl, axis=0)
+        n = np.column_stack([-d[:, 1], d[:, 0]]) / np.hypot(*d.T)[:, None] * half_width
+        for a, b, m in zip(pl[:-1], pl[1:], n):
+            out.append(np.array([a + m, b + m, b - m, a - m]))
+        ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+        ring = half_width * np.column_stack([np.cos(ang), np.sin(ang)])
+        out += [p + ring for p in pl[1:-1]]
+    return out
+
+
 def _hash01(*ints) -> np.ndarray:
     """Deterministic uniform [0, 1) from integer arrays (splitmix-like)."""
     with np.errstate(over="ignore"):
@@ -335,7 +352,11 @@ class World:
         """Ground albedo (ny, nx) float32 on texels centred at ``(x0 + (i+½) texel, y0 + (j+½) texel)``."""
         xs = x0 + (np.arange(nx) + 0.5) * texel
         ys = y0 + (np.arange(ny) + 0.5) * texel
-        alb = self.parcel_albedo_grid(xs, ys)
+        # parcels super-sampled 2 × 2 and box-averaged: a border lands where it is, not on the texel grid
+        fine = self.parcel_albedo_grid(x0 + (np.arange(2 * nx) + 0.5) * texel / 2,
+                                       y0 + (np.arange(2 * ny) + 0.5) * texel / 2)
+        alb = cv2.resize(fine, (nx, ny), interpolation=cv2.INTER_AREA)
+        del fine
         bg = self.background.grid(x0, y0, texel, nx, ny)[0]
         w = self.spec.background_weight
         alb = (1 - w) * alb + w * (bg - float(bg.mean()) + 0.22)
@@ -354,7 +375,7 @@ class World:
             alb[:] = (1 - m) * alb + m * value
 
         burn(self.lakes, _WATER)
-        burn(self.roads, _ROAD, closed=False, thickness=self.spec.road_width_m / texel)
+        burn(_road_polygons(self.roads, 0.5 * self.spec.road_width_m), _ROAD)
         burn(self.buildings, _ROOF)
         if self.spec.deserts:
             step = max(int(round(50.0 / texel)), 1)

@@ -274,5 +274,108 @@ def scenario_key_reference() -> str:
     return "\n".join(lines)
 
 
+
+
+#: one-line meaning per navigation-scenario key
+NAV_MEANING = {
+    "kind": "`\"navigation\"`: says the file is a navigation scenario",
+    "navigation.name": "name of the scenario (default run directory `runs/<name>`)",
+    "navigation.seed": "seed of the world, the flight, the frames and the reference map",
+    "navigation.seeds": "Monte Carlo seeds (IMU and initial errors) of a run",
+    "route.length_km": "route length [km]",
+    "route.speed_mps": "ground speed [m/s]",
+    "route.agl_min_m": "lowest height above the terrain of the flight plan [m]",
+    "route.agl_max_m": "highest height above the terrain of the flight plan [m]",
+    "route.turns": "number of smooth coordinated turns (25–90° each)",
+    "route.max_bank_deg": "largest bank angle in the turns [deg]",
+    "terrain.relief_m": "peak-to-peak relief of the fractal DEM [m]",
+    "terrain.resolution_m": "DEM grid spacing [m]",
+    "terrain.roughness": "Hurst-like exponent of the relief (small: rugged)",
+    "world.field_size_min_m": "smallest field parcel side [m]",
+    "world.field_size_max_m": "largest field parcel side [m]",
+    "degraded[].from_km": "start of a degraded stretch along the route [km]",
+    "degraded[].to_km": "end of the degraded stretch [km]",
+    "degraded[].kind": "featureless sand (`desert`) or fog (`fog`) over the stretch",
+    "degraded[].visibility_m": "fog: meteorological visibility [m]",
+    "world.edge_contrast": "albedo step from which a parcel border is a map line",
+    "world.road_spacing_m": "route length per road crossing the corridor [m]",
+    "world.road_width_m": "road width [m]; the map holds both edges",
+    "world.lakes_per_100km": "lakes per 100 km of route (the map holds their shorelines)",
+    "world.villages_per_100km": "villages per 100 km of route (the map holds building outlines)",
+    "world.background_weight": "weight of the procedural background texture (clutter not in the map)",
+    "camera.width": "image width [px]",
+    "camera.height": "image height [px]",
+    "camera.hfov_deg": "horizontal field of view [deg]",
+    "camera.depression_deg": "optical axis below the vehicle's x axis [deg]",
+    "camera.frame_rate_hz": "camera frame rate [Hz] (must divide imu.rate_hz)",
+    "camera.band": "`visible` (reflected sunlight) or `ir` (emission-like: inverted, weaker contrast)",
+    "camera.visibility_m": "meteorological visibility of the haze [m]",
+    "camera.max_range_m": "range beyond which the ground fades into the sky [m]",
+    "camera.supersample": "rays per pixel side",
+    "camera.snr": "signal-to-noise ratio at the mean radiance",
+    "camera.texel_m": "ground albedo texel [m]",
+    "camera.sun_elevation_deg": "sun elevation [deg]",
+    "camera.sun_azimuth_deg": "sun azimuth from +x toward +y [deg]",
+    "imu.gyro_bias_deg_h": "gyro turn-on bias, 1 σ per axis [°/h]",
+    "imu.accel_bias_mg": "accelerometer turn-on bias, 1 σ per axis [mg]",
+    "imu.gyro_arw_deg_sqrt_h": "gyro angle random walk [°/√h]",
+    "imu.accel_vrw_m_s_sqrt_h": "accelerometer velocity random walk [m/s/√h]",
+    "imu.gyro_scale_ppm": "gyro scale factor error, 1 σ [ppm]",
+    "imu.accel_scale_ppm": "accelerometer scale factor error, 1 σ [ppm]",
+    "imu.rate_hz": "IMU output rate [Hz]",
+    "aiding.interval_s": "time between two aiding sequences [s]",
+    "aiding.frames": "frames per aiding sequence (only those are rendered)",
+    "aiding.frame_step": "camera frames between two frames of a sequence (sets the baseline)",
+    "aiding.first_s": "time of the first aiding sequence [s] (default: one interval)",
+    "aiding.min_views": "real (not virtual) observations a track needs to be reconstructed",
+    "aiding.line_sigma_px": "image-line error propagated into the measurement noise, 1 σ [px]",
+    "aiding.min_lines": "matched lines a fix needs",
+    "aiding.common_sigma_m": "model error common to a sequence's reconstruction (raster edges, mesh vs DEM, shared "
+                             "detector biases), 1 σ per axis [m]",
+    "aiding.max_range_m": "farthest reconstructed line used [m]",
+    "reference_map.segment_sigma_m": "digitisation error of each reference segment, 1 σ per axis [m]",
+    "reference_map.bias_m": "common registration error of the reference map (x, y) [m]",
+    "reference_map.keep_fraction": "share of the true lines the reference map holds",
+    "initial.position_sigma_m": "initial position error, 1 σ per axis [m]",
+    "initial.velocity_sigma_mps": "initial velocity error, 1 σ per axis [m/s]",
+    "initial.attitude_sigma_mrad": "initial roll and pitch error, 1 σ [mrad]",
+    "initial.heading_sigma_mrad": "initial heading error, 1 σ [mrad]",
+    "requirement.final_horizontal_m": "requirement: 95th percentile over seeds of the final horizontal error [m]",
+    "requirement.improvement": "requirement: median ratio unaided / aided final horizontal error",
+    "requirement.nees_inside": "requirement: share of (seed, update) whose position NEES lies inside the χ²₃ 95 % interval",
+}
+
+
+def navigation_key_reference() -> str:
+    """The Markdown reference of every navigation-scenario key (``simsat navigate``)."""
+    from navigation.scenario import _read, load_navigation_scenario
+
+    data, _ = _read("nav_degraded")
+    rec = config.record_keys(True)
+    try:
+        load_navigation_scenario(data)
+    finally:
+        config.record_keys(False)
+    tables: dict = {}
+    for key, kind, default, req, cons in rec:
+        k = _norm(key)
+        table = k.rsplit(".", 1)[0] if "." in k else "(top level)"
+        if all(e[0] != k for e in tables.get(table, [])):
+            tables.setdefault(table, []).append((k, kind, default, req, cons))
+    lines = ["# Navigation scenario keys", "",
+             "Every key of a `kind = \"navigation\"` scenario (`simsat navigate`), as the validators read it "
+             "(generated by `python -m reports.keyref --navigation`; a test checks that this file is up to "
+             "date). An unknown key is an error naming the key; `--set TABLE.KEY=VALUE` overrides one.", ""]
+    for table, entries in tables.items():
+        lines += [f"## `[{table}]`", "", "| key | type | default | accepted | meaning |", "|---|---|---|---|---|"]
+        for k, kind, default, req, cons in entries:
+            lines.append(f"| `{k.rsplit('.', 1)[-1]}` | {kind} | {_fmt_default(default, req)} | {_fmt_range(cons)} | "
+                         f"{NAV_MEANING.get(k, '')} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    print(scenario_key_reference(), end="")
+    import sys
+
+    print(navigation_key_reference() if "--navigation" in sys.argv[1:] else scenario_key_reference(), end="")

@@ -22,5 +22,5 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
         return
     n = int(workers or os.cpu_count() or 1)
     with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+                      silence_logs=logging.CRITICAL) as cluster, Client(cluster) as client:
         yield client

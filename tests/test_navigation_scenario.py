@@ -50,3 +50,16 @@ def test_missing_file_and_syntax_error(tmp_path):
     q.write_text('[navigation]\nseed = 1\n')
     with pytest.raises(ScenarioError, match="navigation.name: missing"):
         load_navigation_scenario(q)
+
+
+def test_key_reference_is_up_to_date_and_every_key_has_a_meaning():
+    from pathlib import Path
+
+    from reports.keyref import navigation_key_reference
+
+    text = navigation_key_reference()
+    rows = [line for line in text.splitlines() if line.startswith("| `")]
+    assert len(rows) > 50
+    assert not [r for r in rows if r.rstrip().endswith("|  |")], "a key without a meaning in NAV_MEANING"
+    doc = Path(__file__).resolve().parents[1] / "docs" / "navigation-keys.md"
+    assert doc.read_text() == text, "run: python -m reports.keyref --navigation > docs/navigation-keys.md"
