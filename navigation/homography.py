@@ -14,7 +14,7 @@ import numpy as np
 from .camera import CameraPose
 
 __all__ = ["plane_homography", "map_segments", "segment_lines", "fit_homography_lines", "ransac_homography_lines",
-           "line_distances"]
+           "trimmed_homography_lines", "line_distances"]
 
 
 def plane_homography(K: np.ndarray, pose1: CameraPose, pose2: CameraPose, normal_w, offset_w: float) -> np.ndarray:
@@ -131,3 +131,39 @@ def ransac_homography_lines(seg1: np.ndarray, seg2: np.ndarray, *, threshold_px:
     if inl.sum() >= 4:
         H = fit_homography_lines(seg1[inl], seg2[inl])
     return H, inl
+
+
+def trimmed_homography_lines(seg1: np.ndarray, seg2: np.ndarray, *, threshold_px: float = 2.0,
+                             iterations: int = 4, rng: np.random.Generator | None = None):
+    """Least squares over all pairs, trimmed: refit on the pairs within ``threshold_px``, a few times.
+
+    The tracker's pairs come from a homography predicted by the INS, so most are
+    right: a handful of least-squares fits does what RANSAC's many minimal
+    samples would. When fewer than half the pairs survive, it falls back to
+    :func:`ransac_homography_lines`. Returns ``(H, inliers)`` like it.
+    """
+    seg1 = np.asarray(seg1, dtype=np.float64).reshape(-1, 4)
+    seg2 = np.asarray(seg2, dtype=np.float64).reshape(-1, 4)
+    n = len(seg1)
+    if n < 4:
+        return None, np.zeros(n, bool)
+    l2 = segment_lines(seg2)
+    keep = np.ones(n, bool)
+    H = None
+    for _ in range(iterations):
+        try:
+            H = fit_homography_lines(seg1[keep], seg2[keep])
+        except (np.linalg.LinAlgError, ValueError):
+            H = None
+            break
+        err = np.abs(line_distances(l2, map_segments(H, seg1))).max(1)
+        # trim progressively: the worst pairs first, the threshold at the end
+        limit = max(threshold_px, float(np.percentile(err[keep], 80))) if _ < iterations - 1 else threshold_px
+        new = err < limit
+        if new.sum() < 4 or np.array_equal(new, keep):
+            keep = new
+            break
+        keep = new
+    if H is None or keep.sum() < max(4, n // 2):
+        return ransac_homography_lines(seg1, seg2, threshold_px=threshold_px, rng=rng)
+    return fit_homography_lines(seg1[keep], seg2[keep]), keep

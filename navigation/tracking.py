@@ -4,8 +4,10 @@ For frames k → k+1 the tracker maps each live track's last segment through
 the homography predicted from the INS relative pose and the ground plane
 (coarse registration), associates it with the nearest segment of k+1 of the
 same orientation that overlaps it, refits the homography to those pairs by
-least squares inside RANSAC (:func:`~navigation.homography.ransac_homography_lines`),
-and associates again with a tighter gate. A track not found in k+1 continues
+least squares,
+and associates again with a tighter gate. The refit is a trimmed least squares
+(:func:`~navigation.homography.trimmed_homography_lines`, RANSAC only when
+most pairs are wrong). A track not found in k+1 continues
 with a *virtual* segment (its last one mapped by the homography) for up to
 ``max_gap`` frames, so that a short occlusion or a missed detection does not
 cut it (claim 4).
@@ -16,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .homography import map_segments, ransac_homography_lines, segment_lines
+from .homography import map_segments, segment_lines, trimmed_homography_lines
 from .segments import segment_angles, segment_lengths
 
 __all__ = ["Track", "TrackingResult", "associate_segments", "track_sequence"]
@@ -104,7 +106,7 @@ def track_sequence(segments: list, predicted: list, *, width: int, height: int, 
         Hf = None
         if len(pairs) >= 6:
             i_idx, j_idx = np.array(pairs).T
-            Hf, _ = ransac_homography_lines(cur[i_idx], nxt[j_idx], threshold_px=1.5, rng=rng)
+            Hf, _ = trimmed_homography_lines(cur[i_idx], nxt[j_idx], threshold_px=1.5, rng=rng)
         if Hf is not None:
             H = Hf
             pairs = associate_segments(map_segments(H, cur), nxt, gate_px=fine_gate_px, angle_deg=angle_deg)

@@ -236,9 +236,13 @@ class World:
                 c, s = math.cos(theta), math.sin(theta)
                 X = xs[ci][None, :] - bi * B
                 Y = ys[cj][:, None] - bj * B
-                iu = np.floor((c * X + s * Y) / lu)
-                iv = np.floor((-s * X + c * Y) / lv)
-                out[cj[0]:cj[-1] + 1, ci[0]:ci[-1] + 1] = 0.12 + 0.24 * _hash01(bi, bj, iu, iv, self.seed)
+                iu = np.floor((c * X + s * Y) / lu).astype(np.int64)
+                iv = np.floor((-s * X + c * Y) / lv).astype(np.int64)
+                # hash each parcel once (a block holds a few hundred), then look the texels up
+                u0, v0 = iu.min(), iv.min()
+                U, V = np.meshgrid(np.arange(u0, iu.max() + 1), np.arange(v0, iv.max() + 1), indexing="ij")
+                table = (0.12 + 0.24 * _hash01(bi, bj, U.astype(float), V.astype(float), self.seed)).astype(np.float32)
+                out[cj[0]:cj[-1] + 1, ci[0]:ci[-1] + 1] = table[iu - u0, iv - v0]
         return out
 
     def desert_distance(self, x, y) -> np.ndarray:

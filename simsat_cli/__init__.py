@@ -81,6 +81,14 @@ def cmd_scenarios(args) -> int:
         except Exception as e:  # pragma: no cover - a broken built-in is a bug
             print(f"{name:10s} (invalid: {e})")
     print(f"\n(files in {next(iter(builtin_scenarios().values())).parent})")
+    from navigation.scenario import builtin_navigation_scenarios, load_navigation_scenario
+
+    print("\nnavigation scenarios (simsat navigate):")
+    for name, path in builtin_navigation_scenarios().items():
+        sc = load_navigation_scenario(path)
+        print(f"{name:14s} {sc.length_m / 1000:.0f} km, {sc.camera.width} x {sc.camera.height} {sc.sensor.band} camera, "
+              f"{sc.imu.gyro_bias_deg_h:g} °/h / {sc.imu.accel_bias_mg:g} mg IMU, {sc.seeds} seeds"
+              + (f", degraded: {', '.join(d.kind for d in sc.degraded)}" if sc.degraded else ""))
     return 0
 
 

@@ -6,7 +6,8 @@ import pytest
 
 from navigation.camera import PinholeCamera
 from navigation.flight import fly, plan_route, true_increments
-from navigation.homography import (fit_homography_lines, map_segments, plane_homography, ransac_homography_lines)
+from navigation.homography import (fit_homography_lines, map_segments, plane_homography, ransac_homography_lines,
+                                   trimmed_homography_lines)
 from navigation.imu import ImuModel
 from navigation.ins import NavState, ins_step, mechanise
 from navigation.kalman import N_STATES, KalmanFilter, ins_error_dynamics, kf_predict, kf_update
@@ -155,6 +156,9 @@ def test_homography_of_a_known_plane_motion():
     Hr, inl = ransac_homography_lines(seg1, bad, threshold_px=1.0)
     assert inl.sum() == 9 and not inl[:3].any()
     assert np.allclose(map_segments(Hr, seg1[3:]), seg2[3:], atol=1e-4)
+    Ht, inl = trimmed_homography_lines(seg1, bad, threshold_px=1.0)
+    assert inl.sum() == 9 and not inl[:3].any()
+    assert np.allclose(map_segments(Ht, seg1[3:]), seg2[3:], atol=1e-4)
 
 
 def test_reconstruction_of_a_known_line_from_exact_poses():

@@ -83,3 +83,43 @@ def test_desert_stretch_is_flagged_no_aiding_and_the_covariance_grows():
     # honest: the error stays inside 3σ while unaided
     for u in inside:
         assert np.hypot(*u["error_m"][:2]) <= 3 * np.hypot(*u["sigma_m"][:2])
+
+
+def test_cli_navigate_writes_a_run_and_refuses_a_foreign_directory(tmp_path, capsys):
+    from simsat_cli import main
+
+    out = tmp_path / "run"
+    assert main(["navigate", "nav_tiny", "--out", str(out), "--seeds", "2", "--workers", "1", "--quiet",
+                 "--set", "route.length_km=6"]) == 0
+    said = capsys.readouterr().out
+    assert "final horizontal error median" in said
+    assert (out / "navigation.nc").exists() and (out / "run.json").exists() and (out / "report" / "index.html").exists()
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("keep me")
+    assert main(["navigate", "nav_tiny", "--out", str(foreign), "--quiet"]) == 2
+    assert "is not a simsat run" in capsys.readouterr().err
+    assert (foreign / "notes.txt").read_text() == "keep me"
+    assert main(["navigate", "nav_tiny", "--set", "camera.hfov_deg=500"]) == 2
+    assert "camera.hfov_deg" in capsys.readouterr().err
+
+
+def test_ir_band_frames_have_lines(tiny_run):
+    from navigation.frames import FrameRenderer, SensorSettings
+    from navigation.segments import SegmentExtractor
+
+    sc, f = tiny_run.sc, tiny_run.flight
+    idx = tiny_run.sequence_indices()[0]
+    pose = sc.camera.pose(f.p[idx[0]], f.R[idx[0]])
+    out = {}
+    for band in ("visible", "ir"):
+        r = FrameRenderer(tiny_run.world, tiny_run.dem, sc.camera, SensorSettings(band=band, supersample=1))
+        r.prepare([pose])
+        img = r.render(pose, rng=np.random.default_rng(0))
+        assert img.shape == (sc.camera.height, sc.camera.width) and np.isfinite(img).all()
+        out[band] = (img, SegmentExtractor()(img))
+    assert len(out["ir"][1]) > 30
+    # the IR-like band is not the visible one relabelled: its contrast is inverted on the ground
+    lower = slice(sc.camera.height // 2, None)
+    c = np.corrcoef(out["visible"][0][lower].ravel(), out["ir"][0][lower].ravel())[0, 1]
+    assert c < 0
