@@ -43,8 +43,13 @@ def normal_distances(points_xy: np.ndarray, ref_seg: np.ndarray) -> np.ndarray:
 
 
 def match_to_reference(lines_xy: np.ndarray, ref, *, gate_m: float, angle_deg: float = 6.0, tol_m: float = 6.0,
-                       min_lines: int = 5, min_directions: int = 2, cell_m: float = 2.0) -> MapMatch:
-    """Associate horizontal segments ``lines_xy`` (n, 4) with the reference map ``ref`` (a LineMap)."""
+                       min_lines: int = 5, min_directions: int = 2, cell_m: float = 2.0,
+                       prior_sigma_m: float | None = None) -> MapMatch:
+    """Associate horizontal segments ``lines_xy`` (n, 4) with the reference map ``ref`` (a LineMap).
+
+    ``prior_sigma_m``: 1-σ of the shift the INS error can cause; a rival island of the vote farther
+    than 3 σ from no shift does not make the vote ambiguous (None: every island counts).
+    """
     n = len(lines_xy)
     if n == 0 or len(ref) == 0:
         return MapMatch([], np.zeros(2), 0, 0, 0, "no reconstructed lines" if n == 0 else "empty reference map")
@@ -92,13 +97,30 @@ def match_to_reference(lines_xy: np.ndarray, ref, *, gate_m: float, angle_deg: f
 
     islands, count = label(score >= max(1, int(np.ceil(0.6 * votes))))
     own = islands[best]
-    runner = max([int(score[islands == k].max()) for k in range(1, count + 1) if k != own], default=0)
-    pairs = []
-    for i, cs in by_line.items():
-        res = [abs(nn @ shift - o) for _, _, nn, o in cs]
-        k = int(np.argmin(res))
-        if res[k] < tol_m:
-            pairs.append((i, cs[k][1]))
+    runner = 0
+    for k in range(1, count + 1):
+        if k == own:
+            continue
+        m = islands == k
+        peak = int(score[m].max())
+        where = np.argmax(np.where(m, score, -1))
+        # a rival shift the INS's own uncertainty makes implausible (beyond 3 σ) is no rival
+        if prior_sigma_m is not None and np.hypot(GX.flat[where], GY.flat[where]) > 3 * prior_sigma_m + tol_m:
+            continue
+        runner = max(runner, peak)
+    # the vote's top is flat over ~tol: refine the shift by least squares on the pairs it selects, twice
+    for _ in range(2):
+        pairs, rows = [], []
+        for i, cs in by_line.items():
+            res = [abs(nn @ shift - o) for _, _, nn, o in cs]
+            k = int(np.argmin(res))
+            if res[k] < tol_m:
+                pairs.append((i, cs[k][1]))
+                rows.append((cs[k][2], cs[k][3]))
+        if len(rows) >= 2:
+            A = np.array([r[0] for r in rows])
+            if np.linalg.matrix_rank(A) == 2:
+                shift = np.linalg.lstsq(A, np.array([r[1] for r in rows]), rcond=None)[0]
     dirs = len({int(np.degrees(ang_l[i]) // 20) for i, _ in pairs})
     status = "ok"
     if len(pairs) < min_lines:

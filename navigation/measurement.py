@@ -113,6 +113,9 @@ def sequence_measurement(camera: PinholeCamera, segments: list, frames_p: np.nda
     tr = track_sequence(segments, _ground_plane_homographies(camera, poses, dem), width=camera.width,
                         height=camera.height, rng=rng)
     good = [x for x in tr.tracks if x.real_count >= s.min_views]
+    # a ground line lies on the terrain; the INS's own error moves the reconstruction off it, so the
+    # height gate widens with the filter's vertical and horizontal uncertainty (terrain slopes ≤ ~0.3)
+    dz_max = s.max_height_error_m + 3.0 * (float(np.sqrt(P[2, 2])) + 0.3 * float(np.sqrt(P[0, 0] + P[1, 1])))
     obs, lines = [], []
     for x in good:
         fr, segs = x.real()
@@ -123,7 +126,7 @@ def sequence_measurement(camera: PinholeCamera, segments: list, frames_p: np.nda
         rng_m = np.linalg.norm(ends - poses[-1].c, axis=1).max()
         dz = ends[:, 2] - dem.height(ends[:, 0], ends[:, 1], outside="clamp")
         if rng_m > s.max_range_m or np.linalg.norm(line.b - line.a) < s.min_length_m or \
-                np.abs(dz).max() > s.max_height_error_m:
+                np.abs(dz).max() > dz_max:
             continue
         obs.append((fr, segs))
         lines.append(ends)
@@ -135,7 +138,8 @@ def sequence_measurement(camera: PinholeCamera, segments: list, frames_p: np.nda
     sig_th = float(np.sqrt(P[8, 8]))
     gate = float(np.clip(s.gate_sigmas * (sig_h + sig_th * 3000.0) + 2 * s.tol_m, 25.0, 800.0))
     lxy = np.array([[a[0], a[1], b[0], b[1]] for a, b in lines])
-    mm = match_to_reference(lxy, ref, gate_m=gate, tol_m=s.tol_m, min_lines=s.min_lines)
+    mm = match_to_reference(lxy, ref, gate_m=gate, tol_m=s.tol_m, min_lines=s.min_lines,
+                            prior_sigma_m=sig_h + sig_th * 3000.0)
     m.shift = mm.shift
     m.matched = len(mm.pairs)
     if mm.status != "ok":

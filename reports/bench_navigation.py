@@ -12,15 +12,18 @@ Measured, and written to ``bench/navigation.json``:
   exceeds 3 × the filter's horizontal σ (counted everywhere);
 * segment detection + tracking time per frame, on the rendered frames of the
   run (640 × 480 on this machine's cores), apart from rendering.
+
+The runs and their reports are written to ``bench/navigation/<scenario>/``.
 """
 from __future__ import annotations
 
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 
-from navigation.io import navigation_dataset, summarise
+from navigation.io import navigation_dataset, summarise, write_navigation
 from navigation.run import NavigationRun
 from navigation.scenario import load_navigation_scenario
 from navigation.segments import SegmentExtractor
@@ -92,17 +95,29 @@ def detection_tracking_ms(run: NavigationRun, *, frames: int = 80) -> dict:
             "size": [sc.camera.width, sc.camera.height]}
 
 
-def _one(name: str, seeds: int | None, workers: int | None, progress: bool) -> tuple:
+def _one(name: str, seeds: int | None, workers: int | None, progress: bool, out_dir: Path | None) -> tuple:
+    """One scenario: the same seeds as ``simsat navigate`` (unless ``seeds`` is given); its run and report
+    written to ``out_dir`` so that the figures behind the numbers can be looked at."""
     sc = load_navigation_scenario(name)
     run = NavigationRun(sc, progress=progress)
-    res = run.run(seeds=list(range(seeds if seeds else sc.seeds)), workers=workers)
+    res = run.run(seeds=None if not seeds else list(range(sc.seed * 1000, sc.seed * 1000 + seeds)), workers=workers)
+    if out_dir is not None:
+        from .navigation_report import make_navigation_report
+
+        write_navigation(res, out_dir / sc.name)
+        make_navigation_report(out_dir / sc.name)
     return sc, run, navigation_dataset(res), res.timings
 
 
 def bench_navigation(*, scenario: str | None = None, degraded: str | None = "nav_degraded", seeds: int | None = None,
-                     workers: int | None = None, progress: bool = True) -> dict:
-    """Run the navigation benchmark (see the module docstring) and return its result."""
-    sc, run, ds, timings = _one(scenario or "nav_default", seeds, workers, progress)
+                     workers: int | None = None, progress: bool = True, out_dir: str | Path | None = "bench/navigation"
+                     ) -> dict:
+    """Run the navigation benchmark (see the module docstring) and return its result.
+
+    The runs (``navigation.nc`` and the report) are written under ``out_dir`` (None: not written).
+    """
+    out_dir = Path(out_dir) if out_dir is not None else None
+    sc, run, ds, timings = _one(scenario or "nav_default", seeds, workers, progress, out_dir)
     s = summarise(ds)
     req = sc.requirement
     out = {"scenario": sc.name, "summary": s, "wrong_fixes": wrong_fixes(ds), "timings": timings,
@@ -113,7 +128,7 @@ def bench_navigation(*, scenario: str | None = None, degraded: str | None = "nav
                       "nees": s["nees_inside_fraction"] >= req["nees_inside"]}}
     out["passed"]["detection_tracking_20ms"] = out["detection_tracking"]["total_ms"] <= 20.0
     if degraded:
-        dsc, _, dds, _ = _one(degraded, seeds, workers, progress)
+        dsc, _, dds, _ = _one(degraded, seeds, workers, progress, out_dir)
         out["degraded"] = {"scenario": dsc.name, "summary": summarise(dds), "flags": degraded_flags(dds, dsc),
                            "wrong_fixes": wrong_fixes(dds)}
     return out

@@ -183,3 +183,44 @@ def test_reconstruction_of_a_known_line_from_exact_poses():
     # the reconstructed extent is inside the true segment and covers most of it
     s = sorted([(line.a - a) @ u, (line.b - a) @ u])
     assert s[0] >= -1e-3 and s[1] <= np.linalg.norm(b - a) + 1e-3 and s[1] - s[0] > 0.85 * np.linalg.norm(b - a)
+
+
+def _grid_map(spacing, n=6):
+    from navigation.world import KINDS, LineMap
+
+    segs = []
+    for k in range(n):
+        for j in range(n):
+            segs.append([k * spacing, j * spacing, k * spacing, (j + 1) * spacing])       # x = const
+            segs.append([j * spacing, k * spacing, (j + 1) * spacing, k * spacing])       # y = const
+    segs = np.array(segs, float)
+    return LineMap(segs, np.full(len(segs), KINDS.index("field_edge")))
+
+
+def test_map_matching_recovers_a_known_shift_and_refuses_ambiguity():
+    from navigation.map_matching import match_to_reference, normal_distances
+
+    ref = _grid_map(170.0)
+    rng = np.random.default_rng(2)
+    pick = rng.choice(len(ref), 12, replace=False)
+    ins_error = np.array([12.0, -7.0])
+    lines = ref.segments[pick] + np.tile(ins_error, 2) + rng.normal(0, 0.5, (12, 4))
+    m = match_to_reference(lines, ref, gate_m=60.0)
+    assert m.status == "ok" and len(m.pairs) == 12
+    assert np.allclose(m.shift, -ins_error, atol=2.5)
+    # each line is paired with its own reference line (a collinear neighbour piece is the same line)
+    for i, j in m.pairs:
+        assert np.abs(normal_distances(ref.segments[pick[i]].reshape(2, 2), np.tile(ref.segments[j], (2, 1)))).max() < 1e-9
+    d = normal_distances(lines[:, :2] + m.shift, ref.segments[[j for _, j in m.pairs]])
+    assert np.abs(d).max() < 4.0
+    # a regular grid 60 m apart seen through a gate of 100 m: rival shifts exist, no fix ...
+    ref2 = _grid_map(60.0)
+    pick2 = rng.choice(len(ref2), 12, replace=False)
+    lines2 = ref2.segments[pick2] + np.tile(ins_error, 2)
+    assert match_to_reference(lines2, ref2, gate_m=100.0).status.startswith("ambiguous")
+    # ... unless the INS's own uncertainty (3 σ = 15 m) rules the rivals out
+    ok = match_to_reference(lines2, ref2, gate_m=100.0, prior_sigma_m=5.0)
+    assert ok.status == "ok" and np.allclose(ok.shift, -ins_error, atol=2.5)
+    # lines of one direction only do not fix a 2-D position
+    one_dir = np.array([s for s in ref.segments if s[0] == s[2]])[:8] + np.tile(ins_error, 2)
+    assert "direction" in match_to_reference(one_dir, ref, gate_m=60.0).status

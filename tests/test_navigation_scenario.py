@@ -63,3 +63,39 @@ def test_key_reference_is_up_to_date_and_every_key_has_a_meaning():
     assert not [r for r in rows if r.rstrip().endswith("|  |")], "a key without a meaning in NAV_MEANING"
     doc = Path(__file__).resolve().parents[1] / "docs" / "navigation-keys.md"
     assert doc.read_text() == text, "run: python -m reports.keyref --navigation > docs/navigation-keys.md"
+
+
+def test_bench_navigation_figures_enter_the_history_with_their_direction():
+    from reports.history import _lower_is_better, figures_of
+
+    r = {"summary": {"final_horizontal_m": {"p95": 3.0, "median": 2.0}, "improvement_median": 900.0,
+                     "nees_inside_fraction": 0.93}, "detection_tracking": {"total_ms": 12.0}}
+    f = figures_of("navigation", r)
+    assert f["navigation.final_horizontal_p95_m"] == 3.0 and f["navigation.detection_tracking_s"] == 0.012
+    assert _lower_is_better("navigation.final_horizontal_p95_m") is True
+    assert _lower_is_better("navigation.detection_tracking_s") is True
+    assert _lower_is_better("navigation.improvement_median") is False
+    assert _lower_is_better("navigation.nees_inside_fraction") is False
+
+
+def test_degraded_flags_and_wrong_fixes_on_a_synthetic_dataset():
+    import numpy as np
+    import xarray as xr
+
+    from reports.bench_navigation import degraded_flags, wrong_fixes
+
+    sc = load_navigation_scenario("nav_degraded")
+    d = np.array([10e3, 21e3, 23e3, 30e3, 44e3, 55e3])
+    status = np.array([["ok", "no", "no", "ok", "no", "ok"]])
+    err = np.zeros((1, 6, 3))
+    err[0, 5, 0] = 10.0                          # a fix 10 m off with σ 1 m: wrong
+    sig = np.ones((1, 6, 3))
+    sig[0, 1:3, :] = [[2, 2, 2], [3, 3, 3]]
+    ds = xr.Dataset({"update_distance_m": (("update",), d), "update_status": (("seed", "update"), status),
+                     "update_error": (("seed", "update", "axis"), err),
+                     "update_sigma": (("seed", "update", "axis"), sig)})
+    fl = degraded_flags(ds, sc)
+    # desert 20–32 km seen only up to 32 − 7 km; fog 42–50 km
+    assert fl["updates_inside"] == 3 and fl["fixes_inside"] == 0 and fl["flagged_no_aiding_fraction"] == 1.0
+    w = wrong_fixes(ds)
+    assert (w["fixes"], w["wrong"]) == (3, 1)
