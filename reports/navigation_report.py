@@ -75,11 +75,11 @@ def draw_map_view(ds, path):
     if ds.sizes.get("match", 0):
         seg = ds.matched_reference.values
         ax.add_collection(LineCollection(seg.reshape(-1, 2, 2), colors=ORANGE, linewidths=1.6,
-                                         label="reference segments matched (seed 1)"))
+                                         label="reference segments matched (first seed)"))
     p = ds.true_position.values
     ax.plot(p[:, 0], p[:, 1], color="k", lw=1.6, label="true trajectory")
-    ax.plot(*ds.unaided_position.values[0, :, :2].T, color="0.45", lw=1.2, ls="--", label="unaided INS (seed 1)")
-    ax.plot(*ds.aided_position.values[0, :, :2].T, color=BLUE, lw=1.0, label="aided INS (seed 1)")
+    ax.plot(*ds.unaided_position.values[0, :, :2].T, color="0.45", lw=1.2, ls="--", label="unaided INS (first seed)")
+    ax.plot(*ds.aided_position.values[0, :, :2].T, color=BLUE, lw=1.0, label="aided INS (first seed)")
     ax.set_aspect("equal")
     pad = 3000.0
     ax.set_xlim(p[:, 0].min() - pad, p[:, 0].max() + pad)
