@@ -179,3 +179,25 @@ def test_a_rendered_point_scores_the_full_chain_and_removes_its_run(tmp_path):
     assert row["error"] == "" and row["design.x"] == 1.0
     assert 0 < row["roll_rms_px"] < row["roll_knowledge_rms_px"] and row["render_s"] > 0 and row["restore_s"] > 0
     assert not (tmp_path / "runs" / "abc").exists()
+
+
+def test_simulated_gain_against_tau_over_the_fig14_curve(tmp_path):
+    import pandas as pd
+
+    from reports.study.outputs import _plot_gain, simulated_gain
+
+    df = pd.DataFrame({"taus_ms": ["7.4,14.8,22.2", "7.4,14.8,22.2", "3.7,7.4,11.1", "3.7,7.4,11.1"],
+                       "roll_rms_px": [0.02, 0.03, 0.05, 0.06], "roll_noise_px": [0.1, 0.1, 0.1, 0.1],
+                       "pitch_rms_px": [0.02, 0.02, 0.04, 0.04], "pitch_noise_px": [0.2, 0.2, 0.2, 0.2]})
+    g = simulated_gain(df)
+    t, v = g["roll"]
+    assert np.allclose(t, [7.4e-3, 7.4e-3, 3.7e-3, 3.7e-3]) and np.allclose(v, [0.2, 0.3, 0.5, 0.6])
+    assert np.allclose(g["pitch"][1], [0.1, 0.1, 0.2, 0.2])
+
+    class Spec:
+        name, level, base = "t", "differential", "tiny"
+
+    png = _plot_gain(Spec(), df, tmp_path / "gain.png")
+    assert png is not None and png.stat().st_size > 10_000
+    # one τ set only: nothing to plot against τ
+    assert _plot_gain(Spec(), df.iloc[:2], tmp_path / "none.png") is None
