@@ -83,6 +83,11 @@ MEANING = {
     "attitude.knowledge.cutoff_hz": "AOCS knowledge bandwidth: it knows the attitude below this [Hz]",
     "attitude.knowledge.rate_hz": "AOCS knowledge sampling rate [Hz]",
     "attitude.knowledge.noise_urad": "AOCS knowledge noise, 1 σ [µrad]",
+    "attitude.knowledge.bias_urad": "constant bias of the AOCS knowledge, 1 σ per axis (drawn from the seed) [µrad]",
+    "attitude.knowledge.drift_urad_per_s": "linear drift of the AOCS knowledge, 1 σ per axis [µrad/s]",
+    "attitude.knowledge.delay_ms": "latency: the knowledge at t describes the attitude at t − delay [ms]",
+    "attitude.knowledge.filter": "the AOCS low-pass: zero phase (forward and backward) or causal (forward only, "
+                                 "with its phase lag); recorded in product.nc",
     "attitude.star_tracker.enabled": "provide sparse absolute star-tracker samples",
     "attitude.star_tracker.rate_hz": "star-tracker sampling rate [Hz]",
     "attitude.star_tracker.noise_urad": "star-tracker noise, 1 σ [µrad]",

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["knowledge_gain", "knowledge_psd_ceiling"]
+__all__ = ["knowledge_gain", "knowledge_response", "knowledge_psd_ceiling"]
 
 #: where the knowledge's gain is below this, the ceiling is infinite (the knowledge says nothing)
 MIN_GAIN = 1e-6
@@ -40,8 +40,27 @@ def knowledge_gain(freq, cutoff_hz: float, order: int) -> np.ndarray:
     return 1.0 / (1.0 + (f / cutoff_hz) ** (2 * int(order)))
 
 
+def knowledge_response(freq, cutoff_hz: float, order: int, kind: str = "butterworth_zero_phase") -> np.ndarray:
+    """Complex response of the knowledge's filter at ``freq`` [Hz].
+
+    ``butterworth_zero_phase``: :func:`knowledge_gain` (real); ``butterworth_causal``: the Butterworth run
+    forward only (its analogue prototype: modulus ``1 / √(1 + (f/f_c)^(2N))`` and a phase lag).
+    """
+    f = np.abs(np.asarray(freq, dtype=np.float64))
+    if kind == "butterworth_causal":
+        from scipy.signal import butter, freqs
+
+        if not cutoff_hz > 0:
+            raise ValueError(f"cutoff_hz: must be > 0, got {cutoff_hz}")
+        b, a = butter(int(order), 2 * np.pi * cutoff_hz, analog=True)
+        return freqs(b, a, 2 * np.pi * f)[1]
+    if kind != "butterworth_zero_phase":
+        raise ValueError(f"kind: unknown knowledge filter {kind!r}")
+    return knowledge_gain(f, cutoff_hz, order).astype(complex)
+
+
 def knowledge_psd_ceiling(knowledge, dt: float, *, cutoff_hz: float, order: int, rate_hz: float,
-                          noise_rad: float) -> tuple[np.ndarray, np.ndarray]:
+                          noise_rad: float, kind: str = "butterworth_zero_phase") -> tuple[np.ndarray, np.ndarray]:
     """Ceiling on the two-sided PSD of the knowledge's error, from the knowledge series itself.
 
     Parameters
@@ -51,9 +70,11 @@ def knowledge_psd_ceiling(knowledge, dt: float, *, cutoff_hz: float, order: int,
     dt : float
         Line period [s].
     cutoff_hz, order : float, int
-        The knowledge's low-pass (zero-phase Butterworth).
+        The knowledge's low-pass (Butterworth).
     rate_hz, noise_rad : float
         Telemetry rate [Hz] and white noise per sample [rad].
+    kind : str
+        The filter as ``product.nc`` records it (:func:`knowledge_response`).
 
     Returns
     -------
@@ -72,7 +93,7 @@ def knowledge_psd_ceiling(knowledge, dt: float, *, cutoff_hz: float, order: int,
     s_k = np.abs(np.fft.rfft(x * w)) ** 2 * dt / np.sum(w ** 2)
     # smoothed over a few bins: the ceiling must not dip between the lines of a line spectrum
     s_k = np.convolve(np.pad(s_k, 2, mode="edge"), np.ones(5) / 5, mode="valid")
-    g = knowledge_gain(f, cutoff_hz, order)
+    g = knowledge_response(f, cutoff_hz, order, kind)
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        ceiling = s_k * ((1.0 - g) / g) ** 2 + noise_rad ** 2 / max(rate_hz, 1e-300)
-    return f, np.where(g > MIN_GAIN, ceiling, np.inf)
+        ceiling = s_k * np.abs((1.0 - g) / g) ** 2 + noise_rad ** 2 / max(rate_hz, 1e-300)
+    return f, np.where(np.abs(g) > MIN_GAIN, ceiling, np.inf)

@@ -412,7 +412,8 @@ def knowledge_ceilings(product: Product, knowledge: dict, settings: RestorationS
     return {a: knowledge_psd_ceiling(knowledge[a], dt, cutoff_hz=float(attrs["knowledge_cutoff_hz"]),
                                      order=int(attrs["knowledge_filter_order"]),
                                      rate_hz=float(attrs["knowledge_rate_hz"]),
-                                     noise_rad=float(attrs["knowledge_noise_urad"]) * RAD_PER_URAD)
+                                     noise_rad=float(attrs["knowledge_noise_urad"]) * RAD_PER_URAD,
+                                     kind=str(attrs.get("knowledge_filter", "butterworth_zero_phase")))
             for a in settings.axes}
 
 

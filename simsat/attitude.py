@@ -31,7 +31,7 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 from scipy.interpolate import CubicSpline, make_interp_spline
-from scipy.signal import butter, sosfiltfilt
+from scipy.signal import butter, sosfilt, sosfiltfilt
 
 from simsat.config import Section
 from simsat.units import AXES, RAD_PER_URAD
@@ -47,6 +47,7 @@ __all__ = [
 MAX_AMPLITUDE_URAD = 1e5    #: 0.1 rad (5.7°): beyond, the small-angle line-of-sight model is meaningless
 MAX_FREQUENCY_HZ = 1e5      #: far above any line rate; bounds the truth sampling
 MAX_SAMPLE_RATE_HZ = 1e4    #: AOCS knowledge / star tracker sampling
+KNOWLEDGE_FILTER_KINDS = ("zero_phase", "causal")   #: ``[attitude.knowledge] filter``
 MAX_PSD_COMPONENTS = 100_000  #: sinusoids of a ``psd`` jitter (memory and time grow with it)
 
 
@@ -59,6 +60,7 @@ def _check_list_max(sec, name: str, values, vmax: float) -> None:
 # with other modules using ``SeedSequence([seed, index])``.
 _STREAM_JITTER = 0x4A17
 _STREAM_KNOWLEDGE = 0x4B10
+_STREAM_KNOWLEDGE_ERRORS = 0x4B11
 _STREAM_STAR = 0x5374
 _DRIFT_SHAPES = ("linear", "quadratic", "sine")
 _CHUNK = 4096  # time samples per block when summing many sinusoids
@@ -594,19 +596,35 @@ _KINDS = tuple(DISTURBANCE_KINDS)
 
 @dataclass(frozen=True)
 class KnowledgeConfig:
-    """``[attitude.knowledge]``: AOCS telemetry (cut-off Hz, rate Hz, noise µrad)."""
+    """``[attitude.knowledge]``: AOCS telemetry (cut-off Hz, rate Hz, noise µrad) and how it errs.
+
+    A real AOCS estimate is not the truth low-passed: it carries a constant
+    bias (``bias_urad``, 1 σ per axis, drawn from the seed), a slow drift
+    (``drift_urad_per_s``, 1 σ per axis), a latency (``delay_ms``: the
+    telemetry at t describes t − delay) and a causal filter (``filter =
+    "causal"``: a Butterworth run forward only, with its phase lag) — the
+    defaults keep the ideal knowledge of the built-in scenarios.
+    """
 
     cutoff_hz: float = 10.0
     rate_hz: float = 50.0
     noise_urad: float = 0.5
+    bias_urad: float = 0.0
+    drift_urad_per_s: float = 0.0
+    delay_ms: float = 0.0
+    filter: str = "zero_phase"
 
     @classmethod
     def from_section(cls, sec: Section) -> "KnowledgeConfig":
         cut = sec.number("cutoff_hz", cls.cutoff_hz, gt=0, le=MAX_FREQUENCY_HZ)
         rate = sec.number("rate_hz", cls.rate_hz, gt=0, le=MAX_SAMPLE_RATE_HZ)
         noise = sec.number("noise_urad", cls.noise_urad, ge=0, le=MAX_AMPLITUDE_URAD)
+        bias = sec.number("bias_urad", cls.bias_urad, ge=0, le=MAX_AMPLITUDE_URAD)
+        drift = sec.number("drift_urad_per_s", cls.drift_urad_per_s, ge=0, le=MAX_AMPLITUDE_URAD)
+        delay = sec.number("delay_ms", cls.delay_ms, ge=0, le=1000.0)
+        filt = sec.string("filter", cls.filter, choices=KNOWLEDGE_FILTER_KINDS)
         sec.finish()
-        return cls(cut, rate, noise)
+        return cls(cut, rate, noise, bias, drift, delay, filt)
 
 
 @dataclass(frozen=True)
@@ -726,7 +744,9 @@ class AttitudeModel:
         """AOCS knowledge over the acquisition, with this model's knowledge settings."""
         k = self.knowledge
         return aocs_knowledge(self, t_start=self.t_start, t_end=self.t_end, cutoff_hz=k.cutoff_hz,
-                              rate_hz=k.rate_hz, noise_urad=k.noise_urad, seed=self.seed)
+                              rate_hz=k.rate_hz, noise_urad=k.noise_urad, seed=self.seed, bias_urad=k.bias_urad,
+                              drift_urad_per_s=k.drift_urad_per_s, delay_ms=k.delay_ms,
+                              causal=k.filter == "causal")
 
     def star_tracker_series(self) -> "AttitudeSeries | None":
         """Star-tracker samples, or None when ``[attitude.star_tracker]`` is disabled."""
@@ -847,13 +867,16 @@ def _sample_times(t_start: float, t_end: float, rate_hz: float) -> np.ndarray:
 
 
 #: the AOCS knowledge's filter: a Butterworth of this order run forward and backward (zero phase), so that its
-#: gain is ``1 / (1 + (f / f_c)^(2 order))`` (recorded in product.nc: a ground segment knows its AOCS filter)
+#: gain is ``1 / (1 + (f / f_c)^(2 order))`` (recorded in product.nc: a ground segment knows its AOCS filter);
+#: or, ``filter = "causal"``, run forward only (gain ``1 / √(1 + (f / f_c)^(2 order))`` and a phase lag)
 KNOWLEDGE_FILTER = "butterworth_zero_phase"
+KNOWLEDGE_FILTER_NAMES = {"zero_phase": "butterworth_zero_phase", "causal": "butterworth_causal"}
 KNOWLEDGE_FILTER_ORDER = 4
 
 
 def aocs_knowledge(model: AttitudeModel, *, t_start: float, t_end: float, cutoff_hz: float = 10.0,
-                   rate_hz: float = 50.0, noise_urad: float = 0.5, seed: int) -> AttitudeSeries:
+                   rate_hz: float = 50.0, noise_urad: float = 0.5, seed: int, bias_urad: float = 0.0,
+                   drift_urad_per_s: float = 0.0, delay_ms: float = 0.0, causal: bool = False) -> AttitudeSeries:
     """Attitude knowledge from AOCS telemetry.
 
     The true attitude low-passed at ``cutoff_hz`` with a zero-phase filter
@@ -863,6 +886,13 @@ def aocs_knowledge(model: AttitudeModel, *, t_start: float, t_end: float, cutoff
     evaluated on a dense grid (fast enough not to alias the model's highest
     frequency) with margins of a few filter time constants, so there is no
     edge transient.
+
+    How a real AOCS errs (all off by default): ``causal`` runs the Butterworth
+    forward only (phase lag); ``delay_ms`` makes the sample at t describe
+    t − delay; per axis a constant bias ~ N(0, ``bias_urad``) and a drift
+    ~ N(0, ``drift_urad_per_s``) × (t − t_start) are added, drawn from
+    ``SeedSequence([seed, 0x4B11])`` (a stream of their own: the noise stays
+    the same bytes).
 
     Parameters
     ----------
@@ -888,18 +918,25 @@ def aocs_knowledge(model: AttitudeModel, *, t_start: float, t_end: float, cutoff
         raise ValueError(f"rate_hz: must be > 0, got {rate_hz}")
     if not noise_urad >= 0:
         raise ValueError(f"noise_urad: must be >= 0, got {noise_urad}")
+    for name, v in (("bias_urad", bias_urad), ("drift_urad_per_s", drift_urad_per_s), ("delay_ms", delay_ms)):
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"{name}: must be >= 0, got {v}")
     fs = max(20.0 * cutoff_hz, 2.5 * model.max_frequency_hz, 4.0 * rate_hz)
+    delay = delay_ms * 1e-3
     margin = 5.0 / cutoff_hz
-    tg = np.arange(t_start - margin, t_end + margin + 1.0 / fs, 1.0 / fs)
+    # a causal filter starts from rest: give its transient a longer lead-in
+    tg = np.arange(t_start - delay - (4 if causal else 1) * margin, t_end + margin + 1.0 / fs, 1.0 / fs)
     sos = butter(KNOWLEDGE_FILTER_ORDER, cutoff_hz, fs=fs, output="sos")
     times = _sample_times(t_start, t_end, rate_hz)
     rng = _rng(seed, _STREAM_KNOWLEDGE)
     noise = rng.standard_normal((3, times.size)) * noise_urad * RAD_PER_URAD
+    err = _rng(seed, _STREAM_KNOWLEDGE_ERRORS).standard_normal((3, 2)) * \
+        np.array([bias_urad, drift_urad_per_s]) * RAD_PER_URAD
     vals = []
     for k, axis in enumerate(AXES):
         y = model.evaluate_axis(axis, tg)
-        yf = sosfiltfilt(sos, y)
-        vals.append(CubicSpline(tg, yf)(times) + noise[k])
+        yf = sosfilt(sos, y) if causal else sosfiltfilt(sos, y)
+        vals.append(CubicSpline(tg, yf)(times - delay) + noise[k] + err[k, 0] + err[k, 1] * (times - t_start))
     return AttitudeSeries(times, *vals)
 
 

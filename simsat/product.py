@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from .attitude import KNOWLEDGE_FILTER, KNOWLEDGE_FILTER_ORDER, AttitudeSeries
+from .attitude import KNOWLEDGE_FILTER_NAMES, KNOWLEDGE_FILTER_ORDER, AttitudeSeries
 from .instrument import Detector, Instrument, Radiometry
 from .platform import Platform
 from .sensor_model import SensorModel
@@ -297,7 +297,7 @@ def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowled
         **({} if knowledge_spec is None else {"knowledge_cutoff_hz": float(knowledge_spec.cutoff_hz),
                                               "knowledge_rate_hz": float(knowledge_spec.rate_hz),
                                               "knowledge_noise_urad": float(knowledge_spec.noise_urad),
-                                              "knowledge_filter": KNOWLEDGE_FILTER,
+                                              "knowledge_filter": KNOWLEDGE_FILTER_NAMES[knowledge_spec.filter],
                                               "knowledge_filter_order": KNOWLEDGE_FILTER_ORDER}),
         "attitude_convention": "body->local R = Rz(yaw) Ry(pitch) Rx(roll); roll moves image across-track",
     }

@@ -74,3 +74,33 @@ def test_ceiling_is_checked():
     with pytest.raises(ValueError, match="psd_ceiling"):
         integrate_wiener([np.random.default_rng(0).standard_normal(100)], [7.4e-3], DT,
                          psd_ceiling=(np.array([2.0, 1.0]), np.array([1.0, 1.0])))
+
+
+def test_causal_knowledge_response_matches_the_filter_run_forward():
+    """The causal Butterworth's complex response against sosfilt measured on sines, and the ceiling uses it."""
+    from scipy.signal import butter, sosfilt
+
+    from restore.knowledge_prior import knowledge_response
+
+    fs, fc = 2000.0, 10.0
+    sos = butter(4, fc, fs=fs, output="sos")
+    t = np.arange(0, 6.0, 1 / fs)
+    for f in (2.0, 8.0, 15.0):
+        y = sosfilt(sos, np.sin(2 * np.pi * f * t))[t > 3.0]
+        tt = t[t > 3.0]
+        c = np.linalg.lstsq(np.column_stack([np.sin(2 * np.pi * f * tt), np.cos(2 * np.pi * f * tt)]), y,
+                            rcond=None)[0]
+        measured = complex(c[0], c[1])
+        h = knowledge_response(f, fc, 4, "butterworth_causal")
+        assert abs(measured - h) < 0.01, (f, measured, h)
+    zp = knowledge_response([2.0, 10.0], fc, 4)
+    assert np.allclose(zp, [knowledge_gain(2.0, fc, 4), 0.5]) and np.allclose(zp.imag, 0)
+    with pytest.raises(ValueError, match="unknown knowledge filter"):
+        knowledge_response(1.0, fc, 4, "kalman")
+    # the causal filter's phase lag leaves more error in band than its modulus alone would say
+    k = np.sin(2 * np.pi * 3.0 * np.arange(4000) * 1e-3) * 1e-6
+    f1, c_zero = knowledge_psd_ceiling(k, 1e-3, cutoff_hz=fc, order=4, rate_hz=50.0, noise_rad=0.0)
+    _, c_causal = knowledge_psd_ceiling(k, 1e-3, cutoff_hz=fc, order=4, rate_hz=50.0, noise_rad=0.0,
+                                        kind="butterworth_causal")
+    i = np.argmin(np.abs(f1 - 3.0))
+    assert c_causal[i] > 10 * c_zero[i]

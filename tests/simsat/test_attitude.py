@@ -234,3 +234,44 @@ def test_star_tracker_samples():
     assert _model([CMG]).star_tracker_series() is None
     n = star_tracker_samples(m, t_start=0.0, t_end=2.0, rate_hz=10.0, noise_urad=3.0, seed=4)
     assert np.std(n.yaw - m.evaluate_axis("yaw", n.time)) == pytest.approx(3 * URAD, rel=0.4)
+
+
+def test_aocs_knowledge_errs_like_a_real_one():
+    """Bias, drift, delay and a causal filter, each against its analytic effect; off by default."""
+    from scipy.signal import butter, freqs
+
+    f0 = 2.0
+    m = _model([{"kind": "harmonic", "axis": "roll", "frequency_hz": f0, "amplitude_urad": 10, "phase_deg": 0.0}],
+               t_end=4.0)
+    kw = dict(t_start=0.0, t_end=4.0, cutoff_hz=10.0, rate_hz=200.0, noise_urad=0.0, seed=3)
+    ideal = aocs_knowledge(m, **kw)
+    assert ideal.roll.tobytes() == aocs_knowledge(m, **kw, bias_urad=0, drift_urad_per_s=0, delay_ms=0).roll.tobytes()
+    t = ideal.time
+
+    def fit(y):   # amplitude, phase, offset and slope of y against a sine at f0
+        A = np.column_stack([np.sin(2 * np.pi * f0 * t), np.cos(2 * np.pi * f0 * t), np.ones_like(t), t])
+        c = np.linalg.lstsq(A, y, rcond=None)[0]
+        return np.hypot(c[0], c[1]), np.arctan2(c[1], c[0]), c[2], c[3]
+
+    # bias and drift: a constant and a slope per axis, drawn from the seed, the same on a flat axis (yaw)
+    from simsat.attitude import _STREAM_KNOWLEDGE_ERRORS, _rng
+
+    b = aocs_knowledge(m, **kw, bias_urad=20.0, drift_urad_per_s=3.0)
+    draws = _rng(3, _STREAM_KNOWLEDGE_ERRORS).standard_normal((3, 2)) * [20.0, 3.0]
+    _, _, off, slope = fit(b.yaw / URAD)
+    assert (off, slope) == pytest.approx(tuple(draws[2]), abs=1e-9)
+    np.testing.assert_allclose(b.yaw / URAD, off + slope * t, atol=1e-9)
+    np.testing.assert_allclose((b.roll - ideal.roll) / URAD, draws[0, 0] + draws[0, 1] * t, atol=1e-9)
+    # delay: the phase lags by 2π f0 delay
+    _, ph_d, _, _ = fit(aocs_knowledge(m, **kw, delay_ms=25.0).roll)
+    _, ph_0, _, _ = fit(ideal.roll)
+    assert ph_0 == pytest.approx(0.0, abs=2e-3)
+    assert ph_d - ph_0 == pytest.approx(-2 * np.pi * f0 * 0.025, abs=2e-3)
+    # causal Butterworth: the analogue prototype's modulus and phase at f0; zero phase has none
+    amp_c, ph_c, _, _ = fit(aocs_knowledge(m, **kw, causal=True).roll)
+    bb, aa = butter(4, 2 * np.pi * 10.0, analog=True)
+    h = freqs(bb, aa, [2 * np.pi * f0])[1][0]
+    assert amp_c / (10 * URAD) == pytest.approx(abs(h), rel=2e-3)
+    assert ph_c == pytest.approx(np.angle(h), abs=3e-3)
+    with pytest.raises(ValueError, match="delay_ms"):
+        aocs_knowledge(m, **kw, delay_ms=-1.0)
