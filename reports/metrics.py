@@ -66,6 +66,12 @@ def attitude_errors(restoration, truth, *, axes=AXES) -> dict:
             k = error_stats(np.where(mask, kn - tru, np.nan), ifov_rad=ifov)
             s.update({f"knowledge_{key}": v for key, v in k.items() if key != "n"})
         s["coverage"] = float(mask.mean())
+        # absolute: the mean kept (what star-tracker anchoring is for)
+        e_abs = (est - tru)[mask]
+        s["absolute_rms_px"] = float(np.sqrt(np.mean(e_abs ** 2)) / ifov) if e_abs.size else float("nan")
+        if kn is not None:
+            k_abs = (kn - tru)[mask]
+            s["knowledge_absolute_rms_px"] = float(np.sqrt(np.mean(k_abs ** 2)) / ifov) if k_abs.size else float("nan")
         c = float(restoration.attrs.get("yaw_pitch_coupling", 0.0))
         if a == "pitch" and abs(c) >= YAW_COUPLING_REPORTED and "knowledge_yaw" in restoration:
             # off nadir the images see pitch + c × (yaw the knowledge misses): the error without that part

@@ -18,6 +18,12 @@ def _fmt(x: float) -> str:
     return "n/a" if x is None or x != x else f"{x:.3f}"
 
 
+def _attitude_errors(run) -> dict:
+    from .metrics import attitude_errors
+
+    return attitude_errors(run.restoration, run.truth)
+
+
 def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -> str:
     """A short text summary of a restored run.
 
@@ -58,6 +64,11 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
                          f"{_fmt(d.get('knowledge_rms_' + key)):>9s}{_fmt(d.get('knowledge_p997_' + key)):>9s}  "
                          f"{d.get('coverage', float('nan')) * 100:8.1f}%")
         lines.append("  (error = estimate − truth, mean removed: the constant is unobservable from images)")
+        if int(run.restoration.attrs.get("anchored_on_star_tracker", 0)):
+            errs = _attitude_errors(run)
+            lines.append("  absolute (mean kept), anchored on the star tracker: " + ", ".join(
+                f"{a} {errs[a]['absolute_rms_px']:.3f} px (knowledge {errs[a].get('knowledge_absolute_rms_px', float('nan')):.3f})"
+                for a in axes_r if a in errs and a != "yaw"))
     verdict = hd.get("verdict") or ""
     if hd.get("passed") is True:
         lines.append(f"requirement: {verdict}")

@@ -530,9 +530,15 @@ def remove_mean(estimate: dict, axes) -> dict:
 
 
 def anchor_on_star_tracker(restored: dict, t_line: np.ndarray, star_tracker, axes) -> tuple[dict, bool]:
-    """Absolute anchoring: shift each restored axis by its mean offset to the star-tracker samples.
+    """Absolute anchoring on the star tracker: what the images cannot see, the slowest part of the error.
 
-    Returns the anchored attitude and whether any axis was anchored.
+    Per restored axis, the star-tracker samples inside the restored span are
+    compared with the restored attitude there. With at least 3 samples
+    spanning half the record or more, their residuals are fitted by an offset
+    and a slope (a drifting AOCS knowledge leaves a trend the image
+    restoration, which trusts the knowledge at low frequency, does not
+    remove); otherwise by their mean. Returns the anchored attitude and
+    whether any axis was anchored.
     """
     out = dict(restored)
     anchored = False
@@ -540,12 +546,21 @@ def anchor_on_star_tracker(restored: dict, t_line: np.ndarray, star_tracker, axe
         return out, anchored
     for a in axes:
         m = np.isfinite(out[a])
-        sel = (star_tracker.time >= t_line[m].min()) & (star_tracker.time <= t_line[m].max()) if m.any() \
-            else np.zeros(0, bool)
-        if sel.sum() >= 1:
-            r_at = np.interp(star_tracker.time[sel], t_line[m], out[a][m])
-            out[a] = out[a] + float(np.mean(getattr(star_tracker, a)[sel] - r_at))
-            anchored = True
+        if not m.any():
+            continue
+        t0, t1 = t_line[m].min(), t_line[m].max()
+        sel = (star_tracker.time >= t0) & (star_tracker.time <= t1)
+        if sel.sum() < 1:
+            continue
+        ts = star_tracker.time[sel]
+        resid = getattr(star_tracker, a)[sel] - np.interp(ts, t_line[m], out[a][m])
+        if sel.sum() >= 3 and ts.max() - ts.min() >= 0.5 * (t1 - t0):
+            tc = 0.5 * (t0 + t1)
+            slope, offset = np.polyfit(ts - tc, resid, 1)
+            out[a] = out[a] + offset + slope * (t_line - tc)
+        else:
+            out[a] = out[a] + float(np.mean(resid))
+        anchored = True
     return out, anchored
 
 

@@ -104,3 +104,26 @@ def test_causal_knowledge_response_matches_the_filter_run_forward():
                                         kind="butterworth_causal")
     i = np.argmin(np.abs(f1 - 3.0))
     assert c_causal[i] > 10 * c_zero[i]
+
+
+def test_anchoring_removes_an_offset_and_a_drift_the_images_cannot_see():
+    from restore.stages import anchor_on_star_tracker
+    from simsat.attitude import AttitudeSeries
+
+    t = np.arange(4000) * 4e-4
+    truth = 1e-6 * np.sin(2 * np.pi * 60 * t)
+    restored = {"roll": truth + 20e-6 + 3e-6 * t, "pitch": truth.copy(), "yaw": np.zeros_like(t)}
+    restored["roll"][:100] = np.nan                     # an unrestored stretch stays unrestored
+    ts = np.arange(0.0, 1.6, 0.25)
+    st = AttitudeSeries(ts, 1e-6 * np.sin(2 * np.pi * 60 * ts), 1e-6 * np.sin(2 * np.pi * 60 * ts), np.zeros_like(ts))
+    out, anchored = anchor_on_star_tracker(restored, t, st, ("roll", "pitch"))
+    assert anchored
+    m = np.isfinite(out["roll"])
+    assert not m[:100].any()
+    assert np.abs(out["roll"][m] - truth[m]).max() < 1e-9      # offset and slope both gone
+    assert np.abs(out["pitch"] - truth).max() < 1e-9
+    # one sample only: the offset, not the slope
+    one = AttitudeSeries(ts[3:4], st.roll[3:4], st.pitch[3:4], st.yaw[3:4])
+    out1, _ = anchor_on_star_tracker(restored, t, one, ("roll",))
+    e = out1["roll"][m] - truth[m]
+    assert abs(e[np.argmin(np.abs(t[m] - ts[3]))]) < 1e-8 and np.ptp(e) > 3e-6
