@@ -35,7 +35,7 @@ from .synthesis import (
     window_compensation,
 )
 
-__all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "select_candidates", "match_candidates",
+__all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
            "knowledge_ceilings", "yaw_pitch_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "check_coverage", "correct_images",
            "attitude_series"]
@@ -157,12 +157,37 @@ class Candidates:
         return f"{self.ahead}/{self.behind}"
 
 
+def shared_columns(sm, ahead: str, behind: str, shape_a: tuple, shape_b: tuple, *, lines, margin_cols: int
+                   ) -> tuple[int, int]:
+    """First and last column of band ``ahead`` whose ground band ``behind`` also sees (knowledge geometry).
+
+    Every column of A is located on the ground at a few ``lines`` and back in B;
+    the columns that land inside B (``margin_cols`` from its edges) on all of
+    them are shared. The main strip and a small dedicated detector share only
+    the columns the small one covers (claim 20).
+    """
+    n_a, n_b = int(shape_a[1]), int(shape_b[1])
+    cols = np.arange(n_a, dtype=float)
+    ok = np.ones(n_a, dtype=bool)
+    for ln in np.asarray(lines, dtype=float):
+        g = sm.direct_location(ahead, np.full(n_a, ln), cols)
+        _, pc = sm.inverse_location(behind, g)
+        ok &= np.isfinite(pc) & (pc > margin_cols) & (pc < n_b - 1 - margin_cols)
+    if not ok.any():
+        raise RestorationError(f"pair {ahead}/{behind}: the two detectors share no columns (band {behind} sees "
+                               f"none of band {ahead}'s ground); check instrument.detectors[].across_track_mm and "
+                               f"pixels, or restoration.pairs")
+    idx = np.flatnonzero(ok)
+    return int(idx[0]), int(idx[-1])
+
+
 def select_candidates(img_a: np.ndarray, shape_b: tuple, ahead: str, behind: str, settings: RestorationSettings,
                       sm) -> Candidates:
     """Select points in band ``ahead`` (a-priori criterion) and predict them in ``behind`` with the knowledge.
 
     Only lines whose homologues fall inside band B (with the matcher's support
-    margin) are used; points predicted outside B are dropped.
+    margin) are used, and only the columns B shares (:func:`shared_columns`);
+    points predicted outside B are dropped.
     """
     n_lines = img_a.shape[0]
     tau = sm.nominal_delay_s(ahead, behind)
@@ -175,10 +200,15 @@ def select_candidates(img_a: np.ndarray, shape_b: tuple, ahead: str, behind: str
         raise RestorationError(f"pair {ahead}/{behind}: image too short ({n_lines} lines) for a delay of "
                                f"{shift_lines:.1f} lines")
     usable[lo:hi] = True
-    lines_a, cols_a = select_points_in_blocks(img_a, method=settings.selection,
+    c0, c1 = shared_columns(sm, ahead, behind, img_a.shape, shape_b, lines=np.linspace(lo, hi, 5), margin_cols=mc)
+    # select only where band B sees the same ground (a small detector shares a few of A's columns):
+    # the crop keeps the matcher's support margin on both sides, so the feasible points are the same
+    a0, a1 = max(c0 - mc, 0), min(c1 + mc + 1, img_a.shape[1])
+    lines_a, cols_a = select_points_in_blocks(img_a[:, a0:a1], method=settings.selection,
                                               per_line=settings.points_per_line, window=settings.window,
                                               search=settings.search, margin=(ml, mc), line_mask=usable,
                                               max_std=settings.texture_max_std_px)
+    cols_a = cols_a + a0
     if lines_a.size == 0:
         return Candidates(ahead, behind, tau, lines_a, cols_a, lines_a.copy(), cols_a.copy())
     g = sm.direct_location(ahead, lines_a, cols_a)
