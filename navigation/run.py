@@ -90,6 +90,13 @@ class NavigationRun:
         extractor = SegmentExtractor()
         seqs = []
         all_idx = self.sequence_indices()
+        if not all_idx:
+            from simsat.config import ScenarioError
+
+            span = (sc.frames - 1) * sc.frame_step / sc.frame_rate_hz
+            raise ScenarioError(f"aiding.first_s: no aiding sequence fits in the flight ({f.t[-1]:.1f} s for "
+                                f"route.length_km = {sc.length_m / 1000:g}; the first sequence starts at "
+                                f"{sc.first_s:g} s and lasts {span:.2f} s); lengthen the route or start earlier")
         keep = set(np.linspace(0, len(all_idx) - 1, min(samples, len(all_idx))).round().astype(int).tolist())
         t_render = t_extract = 0.0
         nframes = 0

@@ -254,7 +254,7 @@ def cmd_navigate(args) -> int:
     print(f"{sc.name}: {s['seeds']} seeds over {s['distance_km']:.0f} km — final horizontal error median "
           f"{f['median']:.1f} m, p95 {f['p95']:.1f} m (unaided median {s['unaided_final_horizontal_m']['median']:.0f} m,"
           f" {s['improvement_median']:.0f}× better); fixes on {100 * s['fixes_fraction']:.0f} % of updates; "
-          f"NEES inside its bounds on {100 * s['nees_inside_fraction']:.0f} % of updates")
+          f"NEES inside the χ²₃ 95 % interval on {100 * s['nees_inside_fraction']:.0f} % of (seed, update)")
     return 0
 
 

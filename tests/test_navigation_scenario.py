@@ -99,3 +99,11 @@ def test_degraded_flags_and_wrong_fixes_on_a_synthetic_dataset():
     assert fl["updates_inside"] == 3 and fl["fixes_inside"] == 0 and fl["flagged_no_aiding_fraction"] == 1.0
     w = wrong_fixes(ds)
     assert (w["fixes"], w["wrong"]) == (3, 1)
+
+
+def test_a_route_too_short_for_any_aiding_sequence_is_named():
+    from navigation.run import NavigationRun
+
+    run = NavigationRun(load_navigation_scenario("nav_tiny", overrides={"route.length_km": 1.5}), progress=False)
+    with pytest.raises(ScenarioError, match="aiding.first_s: no aiding sequence fits"):
+        run.render_sequences()
