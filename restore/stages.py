@@ -204,7 +204,13 @@ def select_candidates(img_a: np.ndarray, shape_b: tuple, ahead: str, behind: str
     # select only where band B sees the same ground (a small detector shares a few of A's columns):
     # the crop keeps the matcher's support margin on both sides, so the feasible points are the same
     a0, a1 = max(c0 - mc, 0), min(c1 + mc + 1, img_a.shape[1])
-    lines_a, cols_a = select_points_in_blocks(img_a[:, a0:a1], method=settings.selection,
+    if (c1 - c0 + 1) >= 0.9 * (img_a.shape[1] - 2 * mc):
+        # B sees (nearly) all of A: no crop, the selection as it always was. (Cropping even one column
+        # changes which points the selection spreads over the lines, and on stress_large_amplitude that
+        # alone doubled the error — measured, not understood yet: the crop is kept for small detectors.)
+        a0, a1 = 0, img_a.shape[1]
+    crop = img_a if (a0, a1) == (0, img_a.shape[1]) else np.ascontiguousarray(img_a[:, a0:a1])
+    lines_a, cols_a = select_points_in_blocks(crop, method=settings.selection,
                                               per_line=settings.points_per_line, window=settings.window,
                                               search=settings.search, margin=(ml, mc), line_mask=usable,
                                               max_std=settings.texture_max_std_px)
