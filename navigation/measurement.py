@@ -26,7 +26,7 @@ from .reconstruction import reconstruct_line
 from .rotations import exp_so3
 from .tracking import track_sequence
 
-__all__ = ["AidingSettings", "SequenceMeasurement", "sequence_measurement"]
+__all__ = ["AidingSettings", "SequenceMeasurement", "sequence_measurement", "ground_plane_homographies"]
 
 
 @dataclass(frozen=True)
@@ -71,7 +71,8 @@ def _poses(camera: PinholeCamera, p, R, t, t_end, delta) -> list[CameraPose]:
     return [camera.pose(pj - dp + dv * (t_end - tj), rot @ Rj) for pj, Rj, tj in zip(p, R, t)]
 
 
-def _ground_plane_homographies(camera, poses, dem):
+def ground_plane_homographies(camera, poses, dem):
+    """Homographies k → k+1 induced by the level ground plane at the DEM height where the first view looks."""
     c = poses[0]
     ray = c.R_wc @ np.array([0.0, 0.0, 1.0])
     s = (c.c[2] - float(np.nanmean(dem.z))) / max(-ray[2], 0.05)
@@ -110,7 +111,7 @@ def sequence_measurement(camera: PinholeCamera, segments: list, frames_p: np.nda
     zero = np.zeros(9)
     poses = _poses(camera, frames_p, frames_R, t, t_end, zero)
     found = int(sum(len(x) for x in segments))
-    tr = track_sequence(segments, _ground_plane_homographies(camera, poses, dem), width=camera.width,
+    tr = track_sequence(segments, ground_plane_homographies(camera, poses, dem), width=camera.width,
                         height=camera.height, rng=rng)
     good = [x for x in tr.tracks if x.real_count >= s.min_views]
     # a ground line lies on the terrain; the INS's own error moves the reconstruction off it, so the
@@ -146,6 +147,9 @@ def sequence_measurement(camera: PinholeCamera, segments: list, frames_p: np.nda
         m.status = mm.status
         return m
     r0 = _residuals(camera, obs, frames_p, frames_R, t, t_end, zero, mm.pairs, ref, dem)
+    if r0 is None:
+        m.status = "degenerate reconstruction"
+        return m
     steps = np.array([1.0] * 3 + [0.05] * 3 + [1e-4] * 3)
     J = np.zeros((len(r0), N_STATES))
     for k in range(9):

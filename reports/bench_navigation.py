@@ -28,7 +28,7 @@ from navigation.run import NavigationRun
 from navigation.scenario import load_navigation_scenario
 from navigation.segments import SegmentExtractor
 from navigation.tracking import track_sequence
-from navigation.measurement import _ground_plane_homographies
+from navigation.measurement import ground_plane_homographies
 
 __all__ = ["bench_navigation", "wrong_fixes", "degraded_flags", "detection_tracking_ms"]
 
@@ -82,7 +82,7 @@ def detection_tracking_ms(run: NavigationRun, *, frames: int = 80) -> dict:
         t0 = time.perf_counter()
         segs = [ext(im) for im in imgs]
         t1 = time.perf_counter()
-        track_sequence(segs, _ground_plane_homographies(sc.camera, poses, run.dem), width=sc.camera.width,
+        track_sequence(segs, ground_plane_homographies(sc.camera, poses, run.dem), width=sc.camera.width,
                        height=sc.camera.height)
         t2 = time.perf_counter()
         det += t1 - t0
