@@ -99,7 +99,7 @@ def lag_corrected_differentials(diffs, taus, dt: float, lags, estimate) -> list:
 
 def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options: dict | None = None,
                    lags=None, sigmas=None, weights=None, highpass_hz: float = 0.0,
-                   psd_ceiling=None) -> AxisIntegration:
+                   psd_ceiling=None, first_stage_gcv: bool = True) -> AxisIntegration:
     """Integrate one axis's differentials of every pair (time synchronisation, method, high-pass).
 
     Parameters
@@ -125,6 +125,11 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
     psd_ceiling : (freq, ceiling), optional
         Upper bound of the prior PSD, for the methods that estimate one
         (:mod:`restore.knowledge_prior`).
+    first_stage_gcv : bool
+        With per-line lags and a method that cannot take them, the first
+        least-squares estimate (it only corrects the lags) picks its
+        curvature weight by generalised cross-validation (five sparse
+        factorisations); False uses the default weight (one solve).
 
     Returns
     -------
@@ -137,7 +142,7 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
     timed = lags is not None and any(np.any(np.asarray(lg) != 0) for lg in lags)
     if timed and not spec.line_lags:
         lsq = integration_method("lsq")
-        first = lsq.function(diffs, taus, dt, **lsq.data_options(lags=lags, sigmas=sigmas))
+        first = lsq.function(diffs, taus, dt, **lsq.data_options(lags=lags, sigmas=sigmas), gcv=first_stage_gcv)
         diffs = lag_corrected_differentials(diffs, taus, dt, lags, first)
     data = spec.data_options(weights=weights, lags=lags, sigmas=sigmas,
                              psd_ceiling=None if "psd" in opts else psd_ceiling)

@@ -76,21 +76,23 @@ class IntegrationRecord:
     unobservable_rms_rad: float = float("nan")
     floor_rms_rad: float = float("nan")
 
-    def rerun(self, diffs=None, *, frozen: bool = True, lags=None) -> np.ndarray:
+    def rerun(self, diffs=None, *, frozen: bool = True, lags=None, first_stage_gcv: bool = True) -> np.ndarray:
         """Integrate other differentials (true ones, noisy ones) through this axis's integration.
 
         With ``frozen`` a data-adaptive method keeps the prior it estimated on
         the measured differentials: the filter is the one that was applied.
         ``lags`` (pair, line) [s] replaces the recorded per-line lags (zeros:
         differentials simulated at the nominal delays need no time
-        synchronisation).
+        synchronisation). ``first_stage_gcv=False``: the least-squares first
+        estimate that corrects the lags takes its default curvature weight
+        (see :func:`restore.axis_integration.integrate_axis`; 5× cheaper).
         """
         opts = integration_method(self.method).frozen_options(self.options, self.spectrum if frozen else None)
         d = self.diffs if diffs is None else np.asarray(diffs, dtype=np.float64)
         lg = self.lags_s if lags is None else np.asarray(lags, dtype=np.float64)
         return integrate_axis(list(d), list(self.taus), self.line_period_s, method=self.method, options=opts,
                               lags=list(lg), sigmas=list(self.sigmas), weights=list(self.weights),
-                              highpass_hz=self.highpass_hz).theta
+                              highpass_hz=self.highpass_hz, first_stage_gcv=first_stage_gcv).theta
 
     def frozen_options(self) -> dict:
         """The method's options with its estimated prior fixed (see :meth:`rerun`)."""
