@@ -139,6 +139,7 @@ MEANING = {
     "restoration.anchor_star_tracker": "absolute constant from star-tracker samples when present",
     "restoration.correct_images": "write corrected.nc and measure misregistration before/after",
     "restoration.correction_column_step": "resampling grid exact every N columns, linear in between",
+    "restoration.corrected_compression": "corrected.nc image compression: zlib (any netCDF reader), lz4 (Blosc, ~12x faster to write, needs the HDF5 Blosc plugin that netCDF4-python wheels carry), none",
     "restoration.min_coverage": "least fraction of lines restored for the run to succeed",
     "restoration.knowledge_prior": "bound the estimated prior PSD by what the AOCS knowledge already knows "
                                    "(its recorded filter, rate and noise): nothing restored deep inside its band",

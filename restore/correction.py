@@ -12,36 +12,200 @@ from __future__ import annotations
 import numpy as np
 
 from simsat.product import clamped_attitude
+from simsat.sensor_model import SensorModel
 
 from .matching import match_points_in_blocks
+from .settings import CORRECTED_COMPRESSION
 
-__all__ = ["resampling_grid", "correct_bands", "correct_band_block", "SPLINE_MARGIN_LINES", "misregistration", "per_line_shift_rms", "rank_within_line", "line_median"]
+__all__ = ["resampling_grid", "resampling_nodes", "correct_bands", "correct_band_block", "correct_band_block_nodes", "SPLINE_MARGIN_LINES", "misregistration", "per_line_shift_rms", "rank_within_line", "line_median"]
 
 
-def resampling_grid(product, band: str, restored, *, column_step: int = 16, lines: slice | None = None):
+def resampling_grid(product, band: str, restored, *, column_step: int = 16, lines: slice | None = None,
+                    exact: bool = False, line_step: int = 32):
     """Raw-image coordinates (lines, cols) of every pixel of the corrected band.
 
-    The mapping is computed exactly (sensor model) on every line and every
+    Output pixel (l, c) shows the ground point ``G`` the band sees there under
+    the knowledge; its raw-image position is ``inverse_location(G)`` under the
+    restored attitude. The mapping is computed on every line and every
     ``column_step``-th column, and interpolated linearly in between (it is
     smooth across the field). ``lines`` limits it to a range of output lines
     (default: all).
+
+    With ``exact`` every grid node is located by the sensor model (direct
+    location of the node, inverse location under the restored attitude).
+    Otherwise (default, ≈ 10× cheaper) the mapping is first order about the
+    knowledge attitude of the output line, ``θ_k(t_l)``, held constant:
+    ``line = l + S_l·(θ_r(t(line)) − θ_k(t_l))``, ``col = c + S_c·(θ_r(t(line))
+    − θ_k(t_l))``, where ``S = ∂(line, col)/∂(roll, pitch, yaw)`` is the sensor
+    model's sensitivity under that constant attitude
+    (:meth:`~simsat.sensor_model.SensorModel.sensitivities`; it depends on the
+    geometry only, so it is computed every ``line_step`` lines and interpolated
+    linearly in between), and the implicit time ``t(line)`` (the attitude moves
+    during the shift) is solved by Newton iterations on ``θ_r`` sampled 32
+    times per line. The neglected terms are second order in the attitude
+    change (a few µrad) and the relief's change of ``S`` between nodes
+    (relative ``Δh / H``): below 1e-3 px for shifts of several pixels (tested
+    against ``exact``).
+    """
+    det = product.instrument.detector(band)
+    rl, rc, cols = resampling_nodes(product, band, restored, column_step=column_step, lines=lines, exact=exact,
+                                    line_step=line_step)
+    return _interpolate_columns(rl, rc, cols, det.pixels)
+
+
+def resampling_nodes(product, band: str, restored, *, column_step: int = 16, lines: slice | None = None,
+                     exact: bool = False, line_step: int = 32):
+    """:func:`resampling_grid` at its grid columns only → ``(rl, rc, cols)``.
+
+    ``rl``, ``rc`` have shape (lines, len(cols)); ``cols`` are every
+    ``column_step``-th column and the last one. Interpolating them linearly
+    across columns gives :func:`resampling_grid`.
     """
     det = product.instrument.detector(band)
     n_lines = product.time.size
     sl = slice(0, n_lines) if lines is None else slice(*lines.indices(n_lines)[:2])
     cols = np.unique(np.r_[np.arange(0, det.pixels, column_step), det.pixels - 1]).astype(np.float64)
     sm_k = product.sensor_model()
-    sm_r = product.sensor_model(attitude=clamped_attitude(restored))
-    L, C = np.meshgrid(np.arange(sl.start, sl.stop, dtype=np.float64), cols, indexing="ij")
-    g = sm_k.direct_location(band, L, C)
-    rl, rc = sm_r.inverse_location(band, g)
-    full_c = np.arange(det.pixels, dtype=np.float64)
-    # linear interpolation across columns, vectorised over lines
+    att_r = clamped_attitude(restored)
+    if exact:
+        sm_r = product.sensor_model(attitude=att_r)
+        L, C = np.meshgrid(np.arange(sl.start, sl.stop, dtype=np.float64), cols, indexing="ij")
+        g = sm_k.direct_location(band, L, C)
+        rl, rc = sm_r.inverse_location(band, g)
+    else:
+        rl, rc = _linearised_grid(sm_k, att_r, band, np.arange(sl.start, sl.stop, dtype=np.float64), cols,
+                                  n_lines=n_lines, line_step=line_step)
+    return rl, rc, cols
+
+
+def _interpolate_columns(rl, rc, cols, pixels: int):
+    """Linear interpolation of grid columns ``cols`` to every column, vectorised over lines."""
+    full_c = np.arange(pixels, dtype=np.float64)
     idx = np.clip(np.searchsorted(cols, full_c, side="right") - 1, 0, len(cols) - 2)
     w = (full_c - cols[idx]) / (cols[idx + 1] - cols[idx])
     out_l = rl[:, idx] * (1 - w) + rl[:, idx + 1] * w
     out_c = rc[:, idx] * (1 - w) + rc[:, idx + 1] * w
     return out_l, out_c
+
+
+#: samples of the restored attitude per line period in the linearised resampling grid (linear
+#: interpolation between them: relative error (2π f Te / 32)² / 8, 1e-4 at 200 Hz)
+_DELTA_SAMPLES_PER_LINE = 32
+
+
+def _linearised_grid(sm_k, att_r, band: str, out_lines: np.ndarray, cols: np.ndarray, *, n_lines: int,
+                     line_step: int, tol_px: float = 1e-6, max_iter: int = 20):
+    """:func:`resampling_grid`'s first-order mapping on ``out_lines`` × ``cols`` → (rl, rc)."""
+    a0, a1 = float(out_lines[0]), float(out_lines[-1])
+    nodes = np.unique(np.r_[np.arange(a0, a1, line_step), a1])
+    t_nodes = sm_k.line_time(nodes)
+    th_nodes = np.stack(sm_k.attitude(t_nodes))  # (3, nodes): the knowledge, frozen at each node
+    mids = 0.5 * (t_nodes[1:] + t_nodes[:-1])
+
+    def frozen(t):  # the attitude of the nearest node, constant around it (inverse location stays near it)
+        k = np.searchsorted(mids, np.asarray(t, dtype=np.float64))
+        return th_nodes[0][k], th_nodes[1][k], th_nodes[2][k]
+
+    Ln, Cn = np.meshgrid(nodes, cols, indexing="ij")
+    g = sm_k.direct_location(band, Ln, Cn)
+    sens = sm_k.sensitivities(band, g, attitude=frozen)  # (nodes, cols, 2, 3) px/rad
+    if nodes.size > 1:
+        j = np.clip(np.searchsorted(nodes, out_lines, side="right") - 1, 0, nodes.size - 2)
+        w = ((out_lines - nodes[j]) / (nodes[j + 1] - nodes[j]))[:, None, None, None]
+        S = sens[j] * (1 - w) + sens[j + 1] * w
+    else:
+        S = np.broadcast_to(sens, (out_lines.size,) + sens.shape[1:])
+    Sl, Sc = S[:, :, 0, :], S[:, :, 1, :]
+    th_k = np.stack(sm_k.attitude(sm_k.line_time(out_lines)))[:, :, None]  # (3, L, 1) θ_k(t_l)
+
+    # θ_r on a fine grid of fractional lines covering the shifts (first guess: at the output line)
+    L0 = np.broadcast_to(out_lines[:, None], (out_lines.size, cols.size))
+    d0 = np.stack(att_r(sm_k.line_time(out_lines)))[:, :, None] - th_k
+    first = L0 + np.einsum("lck,klc->lc", Sl, np.broadcast_to(d0, (3,) + L0.shape))
+    ok = np.isfinite(first)
+    if not ok.any():
+        return np.full(L0.shape, np.nan), np.full(L0.shape, np.nan)
+    margin = 8.0 + 3.0 * float(np.max(np.abs(first[ok] - L0[ok])))
+    g0 = max(0.0, np.floor(a0 - margin))
+    g1 = max(g0 + 1.0, min(float(n_lines - 1), np.ceil(a1 + margin)))
+    m = _DELTA_SAMPLES_PER_LINE
+    grid = g0 + np.arange(int(round((g1 - g0) * m)) + 1) / m
+    th_r = np.stack(att_r(sm_k.line_time(grid)))  # (3, G)
+
+    def attitude_and_slope(x):
+        u = np.clip((x - g0) * m, 0.0, grid.size - 1.000001)
+        i = np.floor(u).astype(np.int64)
+        f = u - i
+        lo, hi = th_r[:, i], th_r[:, i + 1]
+        return lo + (hi - lo) * f, (hi - lo) * m  # (3, L, C) rad and rad per line
+
+    def residual(x):
+        th, slope = attitude_and_slope(x)
+        return x - L0 - np.einsum("lck,klc->lc", Sl, th - th_k), 1.0 - np.einsum("lck,klc->lc", Sl, slope)
+
+    Sl_flat = Sl.reshape(-1, 3)
+    th_k_flat = np.broadcast_to(th_k, (3,) + L0.shape).reshape(3, -1)
+    L0_flat = L0.ravel()
+
+    def residual_at(x, idx):  # the residual and its slope at the flat nodes ``idx`` only
+        th, slope = attitude_and_slope(x)
+        S = Sl_flat[idx]
+        return (x - L0_flat[idx] - np.einsum("nk,kn->n", S, th - th_k_flat[:, idx]),
+                1.0 - np.einsum("nk,kn->n", S, slope))
+
+    # safeguarded Newton inside a bracket (rtsafe): the shift is bounded by Σ_k |S_k| max_t |θ_r,k(t) −
+    # θ_k,k(t_l)| over the sampled span, so the root lies in [l − bound, l + bound]; a Newton step that
+    # leaves the bracket, or a slope <= 0 (the attitude moving faster than the line sweeps: fast jitter
+    # of several pixels), is replaced by bisection. Only the nodes whose |residual| (in lines) still
+    # exceeds ``tol_px`` are iterated (a converged node's Newton step rounds to nothing and would
+    # otherwise read as leaving the bracket).
+    dev = np.maximum(np.abs(th_r.max(axis=1)[:, None] - th_k[:, :, 0]),
+                     np.abs(th_r.min(axis=1)[:, None] - th_k[:, :, 0]))  # (3, L)
+    bound = 1.0 + np.einsum("lck,kl->lc", np.abs(Sl), dev)
+    lo = np.maximum(L0 - bound, g0)
+    hi = np.minimum(L0 + bound, g1)
+    g_lo, _ = residual(lo)
+    g_hi, _ = residual(hi)
+    bracketed = ok & (g_lo <= 0) & (g_hi >= 0)
+    x = np.where(ok, np.clip(first, lo, hi), L0)
+    x_flat, lo_flat, hi_flat = x.ravel().copy(), lo.ravel().copy(), hi.ravel().copy()
+    _bracketed_newton(residual_at, x_flat, lo_flat, hi_flat, np.flatnonzero(bracketed.ravel()), tol=tol_px,
+                      max_iter=max_iter)
+    x = x_flat.reshape(L0.shape)
+    th, _ = attitude_and_slope(x)
+    rc = Cn[:1] + np.einsum("lck,klc->lc", Sc, th - th_k)
+    x[~ok] = np.nan
+    rc[~ok] = np.nan
+    miss = ok & ~bracketed  # the root is not inside the sampled span: the sensor model locates these nodes
+    if miss.any():
+        sm_r = SensorModel(platform=sm_k.platform, instrument=sm_k.instrument, dem=sm_k.dem, attitude=att_r,
+                           t0_s=sm_k.t0_s)
+        x[miss], rc[miss] = sm_r.inverse_location(band, sm_k.direct_location(band, L0[miss], Cn[:1].repeat(
+            L0.shape[0], axis=0)[miss]))
+    return x, rc
+
+
+def _bracketed_newton(residual_at, x, lo, hi, act, *, tol: float, max_iter: int) -> None:
+    """Solve ``g(x) = 0`` in place at the flat nodes ``act``, each inside its bracket ``[lo, hi]``.
+
+    ``residual_at(x_sub, idx) -> (g, g')``; a Newton step that leaves the
+    bracket or meets a slope <= 0 is replaced by bisection; only nodes with
+    ``|g| > tol`` are iterated.
+    """
+    gx, gp = residual_at(x[act], act)
+    for _ in range(max_iter):
+        keep = np.abs(gx) > tol
+        act, gx, gp = act[keep], gx[keep], gp[keep]
+        if act.size == 0:
+            return
+        xa = x[act]
+        lo_a = np.where(gx < 0, xa, lo[act])
+        hi_a = np.where(gx >= 0, xa, hi[act])
+        lo[act], hi[act] = lo_a, hi_a
+        newton = xa - gx / np.where(gp > 0, gp, 1.0)
+        xa = np.where((gp > 0) & (newton >= lo_a) & (newton <= hi_a), newton, 0.5 * (lo_a + hi_a))
+        x[act] = xa
+        gx, gp = residual_at(xa, act)
 
 
 #: lines of raw image read beyond a block's resampling coordinates: the cubic spline prefilter's
@@ -68,29 +232,56 @@ def correct_band_block(img, rl: np.ndarray, rc: np.ndarray, *, n_lines: int | No
     ndarray (l, C) float32
         The resampled block, NaN where the coordinates fall outside the raw image.
     """
-    from scipy.ndimage import map_coordinates
+    from ._spline_kernel import cubic_spline_resample  # compiled: equal to map_coordinates(order=3, "nearest")
 
     if callable(img):
         read, total = img, int(n_lines)
     else:
         read, total = (lambda s: img[s]), img.shape[0]
-    finite_l = rl[np.isfinite(rl)]
-    if finite_l.size == 0:
+    span = _raw_rows(rl, total)
+    if span is None:
         return np.full(rl.shape, np.nan, np.float32)
-    r0 = int(max(0, np.floor(finite_l.min()) - SPLINE_MARGIN_LINES))
-    r1 = int(min(total, np.ceil(finite_l.max()) + SPLINE_MARGIN_LINES + 1))
-    if r1 - r0 < 2:
-        r0, r1 = max(0, min(r0, total - 2)), min(total, max(r0, 0) + 2)
+    r0, r1 = span
     sub = np.asarray(read(slice(r0, r1)), dtype=np.float64)
     n_cols = sub.shape[1]
     inside = (rl >= 0) & (rl <= total - 1) & (rc >= 0) & (rc <= n_cols - 1)
-    out = map_coordinates(sub, [np.nan_to_num(rl) - r0, np.nan_to_num(rc)], order=3, mode="nearest",
-                          prefilter=True).astype(np.float32)
+    out = cubic_spline_resample(sub, np.nan_to_num(rl) - r0, np.nan_to_num(rc)).astype(np.float32)
     out[~inside] = np.nan
     return out
 
 
-def correct_bands(product, *, restored, valid=None, column_step: int = 16, bands=None, path=None,
+def _raw_rows(rl: np.ndarray, total: int) -> tuple[int, int] | None:
+    """First and end raw line a block with raw line coordinates ``rl`` reads (None: no finite one)."""
+    finite_l = rl[np.isfinite(rl)]
+    if finite_l.size == 0:
+        return None
+    r0 = int(max(0, np.floor(finite_l.min()) - SPLINE_MARGIN_LINES))
+    r1 = int(min(total, np.ceil(finite_l.max()) + SPLINE_MARGIN_LINES + 1))
+    if r1 - r0 < 2:
+        r0, r1 = max(0, min(r0, total - 2)), min(total, max(r0, 0) + 2)
+    return r0, r1
+
+
+def correct_band_block_nodes(read, rl: np.ndarray, rc: np.ndarray, cols: np.ndarray, *, pixels: int,
+                             n_lines: int) -> np.ndarray:
+    """:func:`correct_band_block` with the coordinates at grid columns ``cols`` (:func:`resampling_nodes`).
+
+    The coordinates are interpolated across columns inside the compiled
+    sampler (no full-resolution coordinate arrays): equal to
+    ``correct_band_block(read, *interpolated)``. ``read(slice) -> rows`` reads
+    raw lines of the band (``n_lines`` of them, ``pixels`` wide output).
+    """
+    from ._spline_kernel import cubic_spline_resample_nodes
+
+    span = _raw_rows(rl, int(n_lines))
+    if span is None:
+        return np.full((rl.shape[0], int(pixels)), np.nan, np.float32)
+    r0, r1 = span
+    sub = np.asarray(read(slice(r0, r1)), dtype=np.float64)
+    return cubic_spline_resample_nodes(sub, r0, int(n_lines), rl, rc, cols, int(pixels))
+
+
+def correct_bands(product, *, restored, valid=None, column_step: int = 16, bands=None, path=None, compression="zlib",
                   attrs: dict | None = None, block_lines: int = 512):
     """Bands resampled to the knowledge geometry (cubic spline interpolation), block by block.
 
@@ -109,6 +300,9 @@ def correct_bands(product, *, restored, valid=None, column_step: int = 16, bands
         Write the images into this NetCDF file block by block (memory bounded
         by one band and one block) and return it opened lazily; default: an
         in-memory dataset.
+    compression : {"zlib", "lz4", "none"}
+        Compression of the images written to ``path``
+        (:data:`restore.settings.CORRECTED_COMPRESSION`).
     attrs : dict, optional
         Global attributes of the result.
     block_lines : int
@@ -125,6 +319,8 @@ def correct_bands(product, *, restored, valid=None, column_step: int = 16, bands
     names = [n for n in product.band_names if bands is None or n in bands]
     same = len({d.pixels for d in product.instrument.detectors}) == 1
     n_lines = product.time.size
+    if compression not in CORRECTED_COMPRESSION:
+        raise ValueError(f"compression: must be one of {', '.join(CORRECTED_COMPRESSION)}, got {compression!r}")
     attrs = {"title": "simsat corrected images", **(attrs or {})}
     valid = None if valid is None else np.asarray(valid, bool)
     nc = None
@@ -143,7 +339,7 @@ def correct_bands(product, *, restored, valid=None, column_step: int = 16, bands
             if nc is not None:
                 if dims[1] not in nc.dimensions:
                     nc.createDimension(dims[1], det.pixels)
-                var = nc.createVariable(f"image_{name}", "f4", dims, zlib=True, complevel=4, shuffle=True,
+                var = nc.createVariable(f"image_{name}", "f4", dims, **CORRECTED_COMPRESSION[compression],
                                         chunksizes=(min(block_lines, n_lines), det.pixels), fill_value=np.nan)
                 var.setncatts({"units": "DN", "long_name": long_name})
             else:
@@ -153,8 +349,8 @@ def correct_bands(product, *, restored, valid=None, column_step: int = 16, bands
 
             for a in range(0, n_lines, block_lines):
                 sl = slice(a, min(n_lines, a + block_lines))
-                rl, rc = resampling_grid(product, name, restored, column_step=column_step, lines=sl)
-                out = correct_band_block(read, rl, rc, n_lines=n_lines)
+                rl, rc, cols = resampling_nodes(product, name, restored, column_step=column_step, lines=sl)
+                out = correct_band_block_nodes(read, rl, rc, cols, pixels=det.pixels, n_lines=n_lines)
                 if valid is not None:
                     out[~valid[sl]] = np.nan
                 var[sl] = out

@@ -39,12 +39,24 @@ class RestorationSettings:
     anchor_star_tracker: bool = True
     correct_images: bool = True
     correction_column_step: int = 64
+    corrected_compression: str = "zlib"
     min_coverage: float = 0.05
     posterior_samples: int = 8
     knowledge_prior: bool = True
     rematch: int | str = "auto"
     rematch_search: tuple = (2, 2)
     max_sigma_px: float | str = "auto"
+
+
+#: compression of the corrected images (corrected.nc) → netCDF4 createVariable keywords. "zlib" is
+#: readable by every netCDF tool; "lz4" (Blosc LZ4 with byte shuffle, HDF5 filter 32001) compresses
+#: about 12× faster for a file about 3 % larger, but a reader needs the HDF5 Blosc plugin (the
+#: netCDF4-python wheels carry it); "none" writes raw float32 (about 30 % larger)
+CORRECTED_COMPRESSION = {
+    "zlib": {"zlib": True, "complevel": 4, "shuffle": True},
+    "lz4": {"compression": "blosc_lz4", "complevel": 5, "blosc_shuffle": 1},
+    "none": {},
+}
 
 
 def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
@@ -105,6 +117,8 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.anchor_star_tracker = sec.boolean("anchor_star_tracker", s.anchor_star_tracker)
     s.correct_images = sec.boolean("correct_images", s.correct_images)
     s.correction_column_step = sec.integer("correction_column_step", s.correction_column_step, ge=1)
+    s.corrected_compression = sec.string("corrected_compression", s.corrected_compression,
+                                         choices=tuple(CORRECTED_COMPRESSION))
     s.min_coverage = sec.number("min_coverage", s.min_coverage, ge=0, le=1)
     s.knowledge_prior = sec.boolean("knowledge_prior", s.knowledge_prior)
     rm = sec.raw("rematch", "auto")

@@ -624,7 +624,8 @@ def correct_images(product: Product, t_line, restored: dict, knowledge: dict, pa
     rest_fill = {a: np.where(np.isfinite(restored[a]), restored[a], knowledge[a]) for a in AXES}
     valid = np.all([np.isfinite(restored[a]) for a in settings.axes], axis=0)
     corrected = correct_bands(product, restored=attitude_series(t_line, rest_fill), valid=valid,
-                              column_step=settings.correction_column_step, path=path, attrs=attrs)
+                              column_step=settings.correction_column_step, path=path, attrs=attrs,
+                              compression=settings.corrected_compression)
     return corrected, misregistration(product, corrected, pairs, settings)
 
 

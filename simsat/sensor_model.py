@@ -289,15 +289,26 @@ class SensorModel:
         h = 0.05 * te
         ok = np.isfinite(t)
         t = np.where(ok, t, self.t0_s)
+        f0, _ = self._along_residual(det, g, t, att)
         for _ in range(max_iter):
-            f0, _ = self._along_residual(det, g, t, att)
             f1, _ = self._along_residual(det, g, t + h, att)
             deriv = (f1 - f0) / h
             step = -f0 / deriv
             step = np.clip(step, -50 * te, 50 * te)
             ok &= np.isfinite(step)  # a NaN ground point (or a flat residual) stays out, never a NaN time
             step = np.where(ok, step, 0.0)
-            t = t + step
+            # safeguarded Newton: a step that does not reduce |residual| is halved (fast jitter of
+            # several pixels makes the residual's slope change within a step and plain Newton cycle)
+            t_new = t + step
+            f_new, _ = self._along_residual(det, g, t_new, att)
+            for _ in range(8):
+                worse = ok & ~(np.abs(f_new) < np.abs(f0)) & (step != 0)
+                if not worse.any():
+                    break
+                step = np.where(worse, 0.5 * step, step)
+                t_new = np.where(worse, t + step, t_new)
+                f_new[worse] = self._along_residual(det, g[worse], t_new[worse], att)[0]
+            t, f0 = t_new, f_new
             if np.nanmax(np.abs(step)) < tol_line * te:
                 break
         _, b = self._along_residual(det, g, t, att)

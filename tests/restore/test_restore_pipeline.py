@@ -246,6 +246,35 @@ def test_resampling_grid_interpolated_between_exact_columns(tiny_restored):
     assert np.nanmax(np.abs(exact[1] - cols[None, :])) > 0.1
 
 
+@pytest.mark.parametrize("boost_px", [0.0, 6.0])
+def test_linearised_resampling_grid_equals_the_sensor_model(tiny_restored, boost_px):
+    """The first-order grid (default) against the exact sensor-model grid: the restored attitude, and the
+    same plus a 6 px, 80 Hz line on roll and pitch and 20 µrad of yaw (the Newton solve of the implicit time)."""
+    from restore.correction import resampling_grid
+    from simsat.attitude import AttitudeSeries
+    from simsat.product import read_product
+
+    d, _ = tiny_restored
+    product = read_product(d)
+    rest = xr.load_dataset(d / "restoration.nc")
+    t = np.asarray(rest["time"].values, dtype=np.float64)
+    ifov = product.pixel_ifov_rad
+    extra = boost_px * ifov * np.sin(2 * np.pi * 80.0 * t)
+    vals = {a: np.nan_to_num(np.asarray(rest[a].values, dtype=np.float64)) for a in ("roll", "pitch", "yaw")}
+    vals["roll"] = vals["roll"] + extra
+    vals["pitch"] = vals["pitch"] - 0.7 * extra
+    vals["yaw"] = vals["yaw"] + (20e-6 if boost_px else 0.0) * np.cos(2 * np.pi * 30.0 * t)
+    series = AttitudeSeries(time=t, **vals)
+    lines = slice(40, 340)
+    exact = resampling_grid(product, "B2", series, column_step=32, lines=lines, exact=True)
+    fast = resampling_grid(product, "B2", series, column_step=32, lines=lines)
+    moved = np.nanmax(np.abs(exact[0] - np.arange(40, 340)[:, None]))
+    assert moved > (3.0 if boost_px else 0.1)  # the mapping really moves the pixels
+    for e, f in zip(exact, fast):
+        assert np.array_equal(np.isnan(e), np.isnan(f))
+        assert np.nanmax(np.abs(e - f)) < (2e-3 if boost_px else 5e-4)
+
+
 # ----------------------------------------------------------------------------- what restoration.nc records
 def _rms(x):
     x = np.asarray(x, float)
@@ -432,3 +461,32 @@ def test_small_dedicated_detector_restores_from_the_shared_columns_only(tmp_path
     errs = attitude_errors(xr.load_dataset(d / "restoration.nc"), read_truth(d))
     for a in ("roll", "pitch"):
         assert errs[a]["rms_px"] < 0.5 * errs[a]["knowledge_rms_px"]
+
+
+@pytest.mark.parametrize("compression", ["lz4", "none"])
+def test_corrected_images_compression_changes_the_file_not_the_pixels(tiny_restored, tmp_path, compression):
+    """corrected.nc written with Blosc LZ4 or uncompressed holds the same pixels as the default (zlib) one."""
+    import netCDF4
+
+    from restore.correction import correct_bands
+    from simsat.attitude import AttitudeSeries
+    from simsat.product import read_product
+
+    d, _ = tiny_restored
+    product = read_product(d)
+    rest = xr.load_dataset(d / "restoration.nc")
+    t = np.asarray(rest["time"].values, dtype=np.float64)
+    series = AttitudeSeries(time=t, **{a: np.nan_to_num(np.asarray(rest[a].values, dtype=np.float64))
+                                       for a in ("roll", "pitch", "yaw")})
+    ref = correct_bands(product, restored=series, bands=["B1"], path=tmp_path / "zlib.nc")
+    other = correct_bands(product, restored=series, bands=["B1"], path=tmp_path / f"{compression}.nc",
+                          compression=compression)
+    a, b = ref["image_B1"].values, other["image_B1"].values
+    assert np.array_equal(a, b, equal_nan=True) and np.isfinite(a).mean() > 0.9
+    ref.close(), other.close()
+    with netCDF4.Dataset(tmp_path / f"{compression}.nc") as nc:
+        filters = nc["image_B1"].filters()
+    assert (filters.get("blosc") or {}).get("compressor") == "blosc_lz4" if compression == "lz4" else \
+        not filters.get("zlib")
+    with pytest.raises(ValueError, match="compression"):
+        correct_bands(product, restored=series, bands=["B1"], path=tmp_path / "x.nc", compression="gzip")

@@ -193,6 +193,26 @@ def test_noise_estimate_in_blocks_is_the_exact_median():
         assert estimate_image_noise(img) == float(np.median(resp) / (0.6745 * 6.0))
 
 
+def test_noise_estimate_of_a_large_image_is_the_median_of_evenly_spaced_blocks():
+    from scipy import ndimage
+
+    from restore.selection import _IMMERKAER, estimate_image_noise
+
+    rng = np.random.default_rng(5)
+    img = rng.normal(100.0, 4.0, (5000, 60))  # 300 000 pixels, white noise σ = 4
+    full = estimate_image_noise(img)
+    sampled = estimate_image_noise(img, max_pixels=60_000)  # 2 blocks of 512 lines
+    # exactly the median over the two blocks it reads (the first and the last)
+    resp = []
+    for a in (1, 1 + 512 * 9):
+        b = min(4999, a + 512)
+        resp.append(np.abs(ndimage.correlate(img[a - 1:b + 1], _IMMERKAER, mode="nearest")[1:-1, 1:-1]).ravel())
+    assert sampled == float(np.median(np.concatenate(resp)) / (0.6745 * 6.0))
+    assert sampled == pytest.approx(4.0, rel=0.02) and full == pytest.approx(4.0, rel=0.01)
+    with pytest.raises(ValueError, match="max_pixels"):
+        estimate_image_noise(img, max_pixels=0)
+
+
 @pytest.mark.parametrize("method", ["grid", "double_gradient"])
 def test_selection_in_blocks_equals_the_whole_image(method):
     from restore.selection import select_points, select_points_in_blocks

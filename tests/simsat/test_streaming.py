@@ -22,6 +22,16 @@ def test_block_resampling_equals_whole_image_splines():
     assert np.array_equal(np.isnan(blocks), np.isnan(whole))
 
 
+def test_compiled_spline_sampling_equals_scipy_map_coordinates_edges_included():
+    from restore._spline_kernel import cubic_spline_resample
+
+    rng = np.random.default_rng(6)
+    img = rng.normal(500, 50, (60, 45))
+    L, C = np.meshgrid(np.linspace(-3.0, 62.5, 70), np.linspace(-2.2, 47.9, 51), indexing="ij")
+    ref = map_coordinates(img, [L, C], order=3, mode="nearest", prefilter=True)
+    np.testing.assert_allclose(cubic_spline_resample(img, L, C), ref, rtol=0, atol=1e-9)
+
+
 def test_probe_window_gain_is_the_formula_averaged_over_the_hann_kernel():
     """A flat prior gives the point formula back; a line narrower than a bin is spread over the main lobe."""
     from reports.report_data import frozen_chain_gain, probe_window_gain
@@ -107,3 +117,20 @@ def test_matching_in_blocks_equals_whole_image_matching():
     assert ok.mean() > 0.8
     assert abs(np.median(whole.line_b[ok] - la[ok]) - shift_l) < 0.02  # the known shift is found
     assert abs(np.median(whole.col_b[ok] - ca[ok]) - shift_c) < 0.02
+
+
+def test_node_grid_resampling_equals_full_grid_resampling():
+    """Coordinates given at grid columns and interpolated inside the sampler = interpolated first, then sampled."""
+    from restore.correction import _interpolate_columns, correct_band_block, correct_band_block_nodes
+
+    rng = np.random.default_rng(7)
+    img = rng.normal(500, 50, (300, 97)).astype(np.float32)
+    cols = np.unique(np.r_[np.arange(0, 97, 16), 96]).astype(np.float64)
+    L = np.arange(100, 164, dtype=np.float64)[:, None]
+    rl = L + 1.7 * np.sin(cols / 30.0)[None, :] + 0.3 * rng.standard_normal((64, cols.size))
+    rc = cols[None, :] + 0.8 * np.cos(L / 9.0) - 1.2  # some columns fall outside the band: NaN
+    rl[5, 3] = np.nan
+    full = correct_band_block(img, *_interpolate_columns(rl, rc, cols, 97))
+    nodes = correct_band_block_nodes(lambda s: img[s], rl, rc, cols, pixels=97, n_lines=300)
+    assert np.array_equal(np.isnan(full), np.isnan(nodes)) and np.isnan(nodes).any()
+    np.testing.assert_allclose(nodes, full, rtol=0, atol=1e-3)  # float32 DN ~500: rounding only
