@@ -27,6 +27,8 @@ name           principle                                         function
 ``polynomial`` weighted least squares on a polynomial            :func:`.polynomial.integrate_polynomial`
 ``lsq``        time-domain regularised least squares, per-sample  :func:`.lsq.integrate_lsq`
                lags (time synchronisation), GCV-tuned prior
+``parametric`` global parametric synthesis (CNES §2, SPOT5        :func:`.parametric.integrate_parametric`
+               baseline): damped chirps + polynomial
 =============  ===============================================  =====================================
 
 ``DEFAULT_METHOD`` is the most accurate for quasi-harmonic jitter (see

@@ -108,6 +108,8 @@ INTEGRATION_METHODS: dict[str, IntegrationMethod] = {s.name: s for s in (
     _spec("lsq", "lsq", "integrate_lsq",
           "time-domain regularised least squares, per-sample lags (time synchronisation), GCV-tuned prior",
           line_lags=True, line_sigmas=True),
+    _spec("parametric", "parametric", "integrate_parametric",
+          "global parametric synthesis (CNES §2, SPOT5 baseline): damped chirps + polynomial, non-linear least squares"),
 )}
 
 

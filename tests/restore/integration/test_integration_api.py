@@ -18,7 +18,7 @@ def make(n=2000, sigma=0.01, seed=0):
 
 def test_methods_and_default():
     assert set(METHODS) == {"wiener", "wiener_fft", "inverse", "local", "harmonic", "kalman",
-                            "polynomial", "lsq"}
+                            "polynomial", "lsq", "parametric"}
     assert DEFAULT_METHOD in METHODS
     diffs, truth = make()
     a = integrate(diffs, TAUS, DT)
