@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from restore.correction import correct_bands, misregistration
+from restore.correction import correct_bands, misregistration, weak_band_misregistration
 from simsat.attitude import AttitudeSeries
 from simsat.units import AXES
 
@@ -83,7 +83,7 @@ def attitude_errors(restoration, truth, *, axes=AXES) -> dict:
     return out
 
 
-def attitude_misregistration(restoration, truth) -> dict:
+def attitude_misregistration(restoration, truth, *, extra_pairs: dict | None = None) -> dict:
     """Band-to-band misregistration that the attitude error leaves, per pair (truth-based).
 
     A pair of bands ``τ`` apart sees the same ground at ``t`` and ``t + τ``;
@@ -101,6 +101,10 @@ def attitude_misregistration(restoration, truth) -> dict:
         ``tau_s`` per ``pair`` and the attribute ``pixel_ifov_rad``).
     truth : xarray.Dataset
         ``truth.nc``.
+    extra_pairs : dict, optional
+        ``{name: tau_s}`` of band pairs the restoration did not use (a weakly
+        correlated band measured against its nearest pair band), evaluated the
+        same way.
 
     Returns
     -------
@@ -113,7 +117,9 @@ def attitude_misregistration(restoration, truth) -> dict:
     if "pair" not in restoration.coords or "tau_s" not in restoration:
         return {}
     out = {}
-    for name, tau in zip(np.asarray(restoration["pair"].values), np.asarray(restoration["tau_s"].values)):
+    taus = list(zip(np.asarray(restoration["pair"].values), np.asarray(restoration["tau_s"].values)))
+    taus += [(k, v) for k, v in (extra_pairs or {}).items() if np.isfinite(v)]
+    for name, tau in taus:
         tau = float(tau)
         row = {"tau_s": tau}
         for which, prefix in (("restored", ""), ("knowledge", "knowledge_")):
@@ -145,7 +151,7 @@ def attitude_misregistration(restoration, truth) -> dict:
     return out
 
 
-def misregistration_floor(product, truth, pairs, settings) -> dict:
+def misregistration_floor(product, truth, pairs, settings, *, weak_bands: bool = True) -> dict:
     """Image-measured misregistration of bands corrected with the *true* attitude (a control).
 
     The bands are resampled exactly as :func:`restore.correction.correct_bands`
@@ -165,6 +171,9 @@ def misregistration_floor(product, truth, pairs, settings) -> dict:
     pairs : list of restore.pipeline.PairData
         The restoration's matched pairs (their points are re-used).
     settings : restore.pipeline.RestorationSettings
+    weak_bands : bool, keyword-only
+        Also the bands no pair uses, against their nearest pair band
+        (:func:`restore.correction.weak_band_misregistration`).
 
     Returns
     -------
@@ -178,11 +187,16 @@ def misregistration_floor(product, truth, pairs, settings) -> dict:
     from pathlib import Path
 
     used = {b for p in pairs for b in (p.ahead, p.behind)}
+    if weak_bands:
+        used = set(product.band_names)
     with tempfile.TemporaryDirectory(prefix="simsat-control-") as tmp:
         # in a scratch file, block by block: memory bounded by one band, whatever the product's size
         corrected = correct_bands(product, restored=series, column_step=settings.correction_column_step, bands=used,
                                   path=Path(tmp) / "corrected_true.nc")
         try:
-            return misregistration(product, corrected, pairs, settings)
+            out = misregistration(product, corrected, pairs, settings)
+            if weak_bands:
+                out.update(weak_band_misregistration(product, corrected, pairs, settings))
+            return out
         finally:
             corrected.close()

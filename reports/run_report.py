@@ -507,6 +507,11 @@ def _matches_section(pg: _Page, run: D.RunData):
         pg.table(["pair", "candidates", "valid", "inliers", "rejected by synthesis", "failed matching",
                   "gap lines"], rows)
         pg.para("Data (counts per bin): " + ", ".join(links), "files")
+    _misregistration_part(pg, run)
+
+
+def _misregistration_part(pg: _Page, run: D.RunData):
+    """The misregistration figure, table and notes of the matches section."""
     mis = D.misregistration_rows(run)
     if mis:
         fig, ax = P.new_axes(figsize=(8.0, 3.8))
@@ -528,6 +533,16 @@ def _matches_section(pg: _Page, run: D.RunData):
                    f"{_fmt(r['after_line_px'])} / {_fmt(r['after_col_px'])}",
                    f"{_fmt(r['after_line_signal_px'])} / {_fmt(r['after_col_signal_px'])}", _fmt(r["lines"]),
                    _fmt(r["improvement"], 3)] for r in mis])
+        weak = [r for r in mis if r.get("weakly_correlated")]
+        if weak:
+            pg.para("Weakly correlated bands (EP1843295 claims 9–11): "
+                    + "; ".join(f"{_e(r['pair'])} was not used to restore the line of sight (its radiometry "
+                                f"correlates poorly with the visible bands); it is corrected with the attitude "
+                                f"restored from the visible pairs and measured against {_e(r['reference_band'])} on "
+                                f"gradient-magnitude images (edges coincide where the radiometry is inverted): "
+                                f"{_fmt(r['before_px'])} px before, {_fmt(r['after_px'])} px after as measured "
+                                f"(matching noise {_fmt(r['after_noise_px'])} px), {_fmt(r['after_signal_px'])} px "
+                                f"with the noise removed" for r in weak) + ".")
         if any(np.isfinite(r["attitude_total_px"]) for r in mis):
             pg.para("With truth, the misregistration that the restored attitude's error leaves, e(t + τ) − e(t) "
                     "(pitch error along track, roll error across): "

@@ -17,7 +17,7 @@ from simsat.sensor_model import SensorModel
 from .matching import match_points_in_blocks
 from .settings import CORRECTED_COMPRESSION
 
-__all__ = ["resampling_grid", "resampling_nodes", "correct_bands", "correct_band_block", "correct_band_block_nodes", "SPLINE_MARGIN_LINES", "misregistration", "per_line_shift_rms", "rank_within_line", "line_median"]
+__all__ = ["resampling_grid", "resampling_nodes", "correct_bands", "correct_band_block", "correct_band_block_nodes", "SPLINE_MARGIN_LINES", "misregistration", "weak_band_misregistration", "per_line_shift_rms", "rank_within_line", "line_median"]
 
 
 def resampling_grid(product, band: str, restored, *, column_step: int = 16, lines: slice | None = None,
@@ -574,4 +574,89 @@ def misregistration(product, corrected, pairs, settings) -> dict:
             row[f"after_{ax}_noise_px"] = after[f"{ax}_noise_px"]
             row[f"after_{ax}_signal_px"] = after[f"{ax}_signal_px"]
         out[p.name] = row
+    return out
+
+
+def _gradient_reader(read, total: int):
+    """``read(slice) -> rows`` of a band → the same rows of its gradient magnitude (Sobel), exactly as on
+    the whole band (one more line is read on each side)."""
+    from scipy import ndimage
+
+    def grad(s: slice):
+        a, b = max(0, s.start - 1), min(total, s.stop + 1)
+        rows = np.nan_to_num(np.asarray(read(slice(a, b)), dtype=np.float32))
+        g = np.hypot(ndimage.sobel(rows, axis=0, mode="nearest"), ndimage.sobel(rows, axis=1, mode="nearest"))
+        return g[s.start - a:s.start - a + (s.stop - s.start)]
+    return grad
+
+
+def weak_band_misregistration(product, corrected, pairs, settings, *, line_step: int = 2) -> dict:
+    """Misregistration of the bands no pair uses (weakly correlated: near infrared) before / after correction.
+
+    The patent (EP1843295, claims 9–11) corrects a band that correlates poorly
+    with the others (the near infrared against the visible) with the line of
+    sight restored from the well-correlated pairs. Each band outside every
+    restoration pair is measured here against the pair band nearest to it on
+    the focal plane (the shortest delay): points on a regular grid of that
+    band (``settings.points_per_line`` columns every ``line_step`` lines) are
+    matched on **gradient-magnitude** images (edges coincide even where the
+    radiometry is inverted, vegetation bright in the near infrared and dark
+    in the red), raw bands against the knowledge prediction (before), and
+    corrected bands (after), as :func:`misregistration` does.
+
+    Returns
+    -------
+    dict
+        ``{"REF/WEAK" or "WEAK/REF" (ahead/behind): row}`` with the keys of
+        :func:`misregistration` plus ``weakly_correlated`` (True), ``tau_s``
+        and ``valid_fraction`` (matched points / points, after).
+    """
+    used = {n for p in pairs for n in (p.ahead, p.behind)}
+    dets = product.instrument.detectors
+    weak = [d for d in dets if d.name not in used]
+    ref_dets = [d for d in dets if d.name in used]
+    if not weak or not ref_dets:
+        return {}
+    sm = product.sensor_model()
+    n_lines = product.time.size
+    out = {}
+    for w in weak:
+        r = min(ref_dets, key=lambda d: abs(d.along_m - w.along_m))
+        if r.along_m == w.along_m:
+            continue
+        ahead, behind = (r, w) if r.along_m > w.along_m else (w, r)
+        tau = float(product.delay_s(ahead.name, behind.name))
+        margin = settings.window[1] // 2 + settings.search[1] + 8
+        cols = np.linspace(margin, r.pixels - 1 - margin, settings.points_per_line)
+        lines = np.arange(margin, n_lines - margin, line_step, dtype=np.float64)
+        L, C = np.meshgrid(lines, np.rint(cols), indexing="ij")
+        la, ca = L.ravel(), C.ravel()
+        pl, pc = sm.inverse_location(w.name, sm.direct_location(r.name, la, ca))
+        ok = np.isfinite(pl) & np.isfinite(pc)
+        la, ca, pl, pc = la[ok], ca[ok], pl[ok], pc[ok]
+        opts = dict(block_lines=_MISREG_BLOCK, window=settings.window, search=settings.search,
+                    method=settings.match_method, min_quality=settings.min_quality)
+        rows = {}
+        for when, read_r, read_w in (
+                ("before", lambda s: product.image(r.name, lines=s), lambda s: product.image(w.name, lines=s)),
+                ("after", lambda s: np.asarray(corrected[f"image_{r.name}"][s].values),
+                 lambda s: np.asarray(corrected[f"image_{w.name}"][s].values))):
+            m = match_points_in_blocks(_gradient_reader(read_r, n_lines), _gradient_reader(read_w, n_lines),
+                                       (n_lines, n_lines), la, ca, pl, pc, **opts)
+            good = np.asarray(m.valid, bool)
+            rows[when] = per_line_shift_rms(np.rint(la[good]), m.line_b[good] - pl[good], m.col_b[good] - pc[good],
+                                            n_lines, cols=ca[good], weights_l=_inverse_variance(m.std_line[good]),
+                                            weights_c=_inverse_variance(m.std_col[good]))
+            rows[when]["valid_fraction"] = float(good.mean()) if good.size else 0.0
+        b, a = rows["before"], rows["after"]
+        row = {"before_px": b["total_px"], "after_px": a["total_px"], "after_noise_px": a["noise_px"],
+               "after_net_px": a["net_px"], "after_signal_px": a["total_signal_px"], "lines": a["lines"],
+               "weakly_correlated": True, "reference_band": r.name, "tau_s": tau,
+               "valid_fraction": a["valid_fraction"]}
+        for ax in ("line", "col"):
+            row[f"before_{ax}_px"] = b[f"{ax}_px"]
+            row[f"after_{ax}_px"] = a[f"{ax}_px"]
+            row[f"after_{ax}_noise_px"] = a[f"{ax}_noise_px"]
+            row[f"after_{ax}_signal_px"] = a[f"{ax}_signal_px"]
+        out[f"{ahead.name}/{behind.name}"] = row
     return out

@@ -150,7 +150,10 @@ class RestorationResult:
         corr = ", ".join(f"{a} {np.nanstd(self.correction[a]) / px:.3f} px rms" for a in self.settings.axes)
         lines.append(f"  correction applied: {corr}")
         for k, v in (self.misregistration or {}).items():
-            lines.append(f"  misregistration {k}: before {v['before_px']:.3f} px, after {v['after_px']:.3f} px "
+            weak = (f" (weakly correlated, corrected from the restored attitude; gradient matching against "
+                    f"{v.get('reference_band')}, {100 * v.get('valid_fraction', 0):.0f} % of points)"
+                    if v.get("weakly_correlated") else "")
+            lines.append(f"  misregistration {k}{weak}: before {v['before_px']:.3f} px, after {v['after_px']:.3f} px "
                          f"measured (line {v['after_line_px']:.3f}, column {v['after_col_px']:.3f}; matching "
                          f"noise {v['after_noise_px']:.3f} px); without the noise {v['after_signal_px']:.3f} px "
                          f"(line {v['after_line_signal_px']:.3f}, column {v['after_col_signal_px']:.3f})")

@@ -16,7 +16,7 @@ from simsat.product import Product, clamped_attitude
 from simsat.units import RAD_PER_URAD
 
 from .axis_integration import integrate_axis
-from .correction import correct_bands, line_median, misregistration, rank_within_line
+from .correction import correct_bands, line_median, misregistration, rank_within_line, weak_band_misregistration
 from .errors import RestorationError
 from .integration.wiener import spectrum_for_lines
 from .matching import match_points, support_margin
@@ -626,7 +626,9 @@ def correct_images(product: Product, t_line, restored: dict, knowledge: dict, pa
     corrected = correct_bands(product, restored=attitude_series(t_line, rest_fill), valid=valid,
                               column_step=settings.correction_column_step, path=path, attrs=attrs,
                               compression=settings.corrected_compression)
-    return corrected, misregistration(product, corrected, pairs, settings)
+    mis = misregistration(product, corrected, pairs, settings)
+    mis.update(weak_band_misregistration(product, corrected, pairs, settings))
+    return corrected, mis
 
 
 def attitude_series(time, values: dict) -> AttitudeSeries:

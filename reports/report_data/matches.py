@@ -107,13 +107,17 @@ def misregistration_rows(run: RunData) -> list:
             x = v.get(k)
             r[k] = float(x) if isinstance(x, (int, float)) and x is not None else float("nan")
         r["lines"] = int(v.get("lines", 0) or 0)
+        r["weakly_correlated"] = bool(v.get("weakly_correlated", False))
+        r["reference_band"] = str(v.get("reference_band", ""))
+        r["tau_s"] = float(v.get("tau_s", float("nan")) or float("nan"))
         r["improvement"] = r["before_px"] / r["after_px"] if r["after_px"] and r["after_px"] > 0 else float("nan")
         rows.append(r)
     # with truth: the misregistration the restored attitude's error leaves (geometric, noise-free)
     geo = {}
     if run.truth is not None:
         try:
-            geo = attitude_misregistration(rest, run.truth)
+            geo = attitude_misregistration(rest, run.truth, extra_pairs={
+                r["pair"]: r["tau_s"] for r in rows if r["weakly_correlated"]})
         except (KeyError, ValueError):
             geo = {}
     for r in rows:
