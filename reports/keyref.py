@@ -132,7 +132,7 @@ MEANING = {
     "restoration.highpass_hz": "high-pass of the estimate [Hz]: \"auto\" = 0.2 × the AOCS knowledge cut-off recorded in product.nc (10 Hz → 2 Hz)",
     "restoration.max_gap_fill_lines": "longest run of lines filled from neighbours; longer gaps are NaN",
     "restoration.compensate_window": "undo the matching window's moving average on the differentials",
-    "restoration.method": "integration method (default wiener); options in [restoration.integration]",
+    "restoration.method": "integration method (default wiener), or \"auto\": per axis the one of wiener and lsq that best predicts each pair left out from the others (leave-one-pair-out cross-validation on the differentials); options in [restoration.integration] (none with auto)",
     "restoration.integration": "options of the integration method (table below)",
     "restoration.iterations": "passes with re-prediction from the refined attitude",
     "restoration.pair_order": "fused (all pairs at once) or best_first (patent claims 9-11)",

@@ -214,7 +214,7 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
              "integration": json.dumps({a: {"pairs": rec.pairs, "method": rec.method, "options": rec.options,
                                             "highpass_hz": rec.highpass_hz, "line_period_s": rec.line_period_s,
                                             "unobservable_rms_rad": rec.unobservable_rms_rad,
-                                            "floor_rms_rad": rec.floor_rms_rad}
+                                            "floor_rms_rad": rec.floor_rms_rad, "selection": rec.selection}
                                         for a, rec in res.integration.items()}, sort_keys=True)}
     for a in AXES:
         attrs[f"coverage_{a}"] = res.coverage[a]
@@ -275,7 +275,7 @@ def _records_from(ds, info: dict) -> dict:
             highpass_hz=float(meta["highpass_hz"]), spectrum=spec, increment=_values(ds, f"increment_{a}"),
             previous=_values(ds, f"previous_estimate_{a}"),
             unobservable_rms_rad=float(meta.get("unobservable_rms_rad", float("nan"))),
-            floor_rms_rad=float(meta.get("floor_rms_rad", float("nan"))))
+            floor_rms_rad=float(meta.get("floor_rms_rad", float("nan"))), selection=meta.get("selection"))
     return out
 
 

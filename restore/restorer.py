@@ -21,7 +21,7 @@ from simsat.product import Product, clamped_attitude
 
 from . import stages
 from .errors import RestorationError
-from .integration.methods import integration_method
+from .method_choice import resolved_method_name
 from .matching import MATCHING_METHODS
 from .result import PairData, RestorationResult
 from .settings import RestorationSettings
@@ -118,7 +118,7 @@ class Restorer:
         return RestorationResult(run_dir=run_dir, time=product.time, restored=restored, knowledge=knowledge,
                                  correction=correction, coverage=coverage, pairs=pairs, timings=timings,
                                  misregistration=misreg, settings=s, pixel_ifov_rad=product.pixel_ifov_rad,
-                                 method=integration_method(s.method).name, integration=records,
+                                 method=resolved_method_name(s.method), integration=records,
                                  anchored=anchored, corrected=corrected,
                                  sigma={a: ps.sigma for a, ps in sigma.items()}, flagged=flagged,
                                  noise_scale={a: ps.noise_scale for a, ps in sigma.items()},

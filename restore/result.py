@@ -75,6 +75,7 @@ class IntegrationRecord:
     previous: np.ndarray
     unobservable_rms_rad: float = float("nan")
     floor_rms_rad: float = float("nan")
+    selection: dict | None = None  #: how ``method`` was chosen when restoration.method = "auto"
 
     def rerun(self, diffs=None, *, frozen: bool = True, lags=None, first_stage_gcv: bool = True) -> np.ndarray:
         """Integrate other differentials (true ones, noisy ones) through this axis's integration.

@@ -8,6 +8,7 @@ from simsat.validation import register_table_check
 
 from .integration import check_options, integration_method
 from .matching import MATCHING_METHODS
+from .method_choice import AUTO_CANDIDATES, AUTO_METHOD
 from .selection import SELECTION_METHODS
 from .synthesis import AXES
 
@@ -101,16 +102,23 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     if m is not None:
         if not isinstance(m, str):
             raise sec.error("method", f"must be a method name (string), got {m!r}")
-        try:
-            integration_method(m)
-        except ValueError as e:
-            raise sec.error("method", str(e).split(": ", 1)[1]) from None
+        if m != AUTO_METHOD:
+            try:
+                integration_method(m)
+            except ValueError as e:
+                raise sec.error("method", str(e).split(": ", 1)[1] + f" (or {AUTO_METHOD!r})") from None
     s.method = m
     opts = sec.section("integration")
-    try:
-        s.integration_options = dict(check_options(m, dict(opts.data), where=opts.path))
-    except ValueError as e:
-        raise ScenarioError(str(e)) from None
+    if m == AUTO_METHOD:
+        if opts.data:
+            raise sec.error("integration", f"takes no options with method = {AUTO_METHOD!r} (it chooses between "
+                                           f"{', '.join(AUTO_CANDIDATES)} with their defaults); got "
+                                           f"{', '.join(sorted(opts.data))}")
+    else:
+        try:
+            s.integration_options = dict(check_options(m, dict(opts.data), where=opts.path))
+        except ValueError as e:
+            raise ScenarioError(str(e)) from None
     opts.finish(extra_allowed=opts.data.keys())
     s.iterations = sec.integer("iterations", s.iterations, ge=1, le=10)
     s.pair_order = sec.string("pair_order", s.pair_order, choices=("fused", "best_first"))

@@ -20,6 +20,7 @@ from .correction import correct_bands, line_median, misregistration, rank_within
 from .errors import RestorationError
 from .integration.wiener import spectrum_for_lines
 from .matching import match_points, support_margin
+from .method_choice import resolve_method
 from .observability import observability
 from .knowledge_prior import knowledge_psd_ceiling
 from .posterior import posterior_sigma
@@ -474,7 +475,10 @@ def integrate_differentials(axis: str, used: list, differentials: list, previous
     lags = [d.lag_s for d in differentials]
     sigmas = [d.sigmas[axis] for d in differentials]
     weights = [d.weight for d in differentials]
-    res = integrate_axis(diffs, taus, line_period_s, method=settings.method, options=settings.integration_options,
+    method, selection = resolve_method(settings.method, diffs, taus, line_period_s, lags=lags, sigmas=sigmas,
+                                       weights=weights, psd_ceiling=psd_ceiling)
+    res = integrate_axis(diffs, taus, line_period_s, method=method,
+                         options=settings.integration_options if selection is None else {},
                          lags=lags, sigmas=sigmas, weights=weights, highpass_hz=settings.highpass_hz,
                          psd_ceiling=psd_ceiling)
     prior = res.spectrum or spectrum_for_lines(diffs, taus, line_period_s)
@@ -484,7 +488,7 @@ def integrate_differentials(axis: str, used: list, differentials: list, previous
                              line_period_s=line_period_s, method=res.method.name, options=res.options,
                              highpass_hz=settings.highpass_hz, spectrum=res.spectrum, increment=res.theta,
                              previous=np.nan_to_num(previous), unobservable_rms_rad=obs.unobservable_rms_rad,
-                             floor_rms_rad=obs.floor_rms_rad)
+                             floor_rms_rad=obs.floor_rms_rad, selection=selection)
 
 
 # --------------------------------------------------------------------------- coupled yaw
