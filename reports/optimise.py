@@ -35,7 +35,7 @@ from simsat.scenario import load_scenario
 
 from .study.evaluate import differential_point, rendered_point, scenario_pairs
 
-__all__ = ["jitter_psd", "layout_overrides", "screen_layouts", "optimise_layout"]
+__all__ = ["jitter_psd", "layout_overrides", "screen_layouts", "screen_strip_lines", "optimise_layout"]
 
 AXES_RESTORED = ("roll", "pitch")
 
@@ -105,6 +105,22 @@ def screen_layouts(psd: dict, *, noise_px: float, max_spread_s: float, min_tau_l
                                             highpass_hz=psd["highpass_hz"]).floor_rms_rad / ifov
                               for a in AXES_RESTORED)
     return {"tau_lines": grid, "floor_px": floor, "dt": dt}
+
+
+def screen_strip_lines(psd: dict, *, noise_px: float, strip_lines: int) -> dict:
+    """Claims 22–23: one strip detector, two of its lines used as the pair — the worst-axis Wiener floor [px]
+    of each line separation ``k = 1 .. strip_lines − 1`` (one pair, ``τ = k`` line periods), and the best ``k``.
+
+    Returns ``{"separation_lines": k, "tau_s": k dt, "floor_px": floor, "best_lines": k*}``.
+    """
+    dt, ifov = psd["dt"], psd["ifov"]
+    if int(strip_lines) < 2:
+        raise ValueError(f"strip_lines: a strip needs at least 2 lines, got {strip_lines}")
+    k = np.arange(1, int(strip_lines))
+    floor = np.array([max(observability(psd["freq"], psd[a], noise_px * ifov, [n * dt], dt,
+                                        highpass_hz=psd["highpass_hz"]).floor_rms_rad / ifov
+                          for a in AXES_RESTORED) for n in k])
+    return {"separation_lines": k, "tau_s": k * dt, "floor_px": floor, "best_lines": int(k[np.argmin(floor)])}
 
 
 def _predicted(base, over, *, noise_px, seeds) -> dict:

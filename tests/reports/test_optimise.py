@@ -47,3 +47,26 @@ def test_optimise_on_tiny_finds_a_layout_at_least_as_good_as_the_reference(tmp_p
     assert res["best"]["worst_px"] <= res["reference"]["worst_px"]
     assert res["reference"]["tau_ms"] == pytest.approx([7.4, 14.8, 22.2], rel=1e-6)
     assert (tmp_path / "optimise.png").stat().st_size > 1000
+
+
+def test_strip_line_screen_is_the_single_pair_floor_and_avoids_the_blind_separation():
+    """Claims 22–23: one pair from two lines of a strip; a line at 125 Hz makes the separation whose
+    blind frequency 1/τ falls on it (20 lines of 0.4 ms) the worst, and the screen equals the formula."""
+    import numpy as np
+
+    from reports.optimise import screen_strip_lines
+    from restore.observability import observability
+
+    dt, ifov = 4e-4, 4e-6
+    f = np.linspace(0, 1 / (2 * dt), 2049)
+    S = np.where(np.abs(f - 125.0) < 1.0, 1e-12, 1e-18)
+    psd = {"freq": f, "roll": S, "pitch": 0.5 * S, "dt": dt, "ifov": ifov, "highpass_hz": 1.0}
+    r = screen_strip_lines(psd, noise_px=0.05, strip_lines=24)
+    k = r["separation_lines"]
+    assert list(k) == list(range(1, 24))
+    assert k[np.argmax(r["floor_px"])] == 20
+    assert r["best_lines"] != 20 and r["floor_px"][k == r["best_lines"]][0] == r["floor_px"].min()
+    exp = observability(f, S, 0.05 * ifov, [7 * dt], dt, highpass_hz=1.0).floor_rms_rad / ifov
+    assert r["floor_px"][6] == pytest.approx(exp)
+    with pytest.raises(ValueError, match="strip_lines"):
+        screen_strip_lines(psd, noise_px=0.05, strip_lines=1)
