@@ -76,7 +76,7 @@ def _held_out_residuals(method: str, diffs, taus, dt: float, *, lags=None, sigma
         try:
             fit = integrate_axis([diffs[j] for j in keep], [taus[j] for j in keep], dt, method=method,
                                  lags=pick(lags), sigmas=pick(sigmas), weights=pick(weights),
-                                 psd_ceiling=psd_ceiling, first_stage_gcv=False).theta
+                                 psd_ceiling=psd_ceiling).theta
             r = d - predicted_differential(fit, float(taus[k]), dt, None if lags is None else lags[k])
         except ValueError:  # the fold cannot be integrated (a pair without any valid sample)
             r = np.full(d.shape, np.nan)
