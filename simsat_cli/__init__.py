@@ -71,15 +71,15 @@ def _parse_set(items: list[str] | None) -> dict:
 
 # --------------------------------------------------------------------------- commands
 def cmd_scenarios(args) -> int:
-
+    width = max(len(n) for n in builtin_scenarios())
     for name, path in builtin_scenarios().items():
         try:
             sc = load_scenario(path, check_models=False)
             d = sc.instrument.detectors
             size = f"{sc.acquisition.lines} lines x {d[0].pixels} px x {len(d)} bands"
-            print(f"{name:10s} {size:34s} {sc.description}")
+            print(f"{name:{width}s}  {size:32s} {sc.description}")
         except Exception as e:  # pragma: no cover - a broken built-in is a bug
-            print(f"{name:10s} (invalid: {e})")
+            print(f"{name:{width}s}  (invalid: {e})")
     print(f"\n(files in {next(iter(builtin_scenarios().values())).parent})")
     from navigation.scenario import builtin_navigation_scenarios, load_navigation_scenario
 
