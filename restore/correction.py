@@ -590,7 +590,8 @@ def _gradient_reader(read, total: int):
     return grad
 
 
-def weak_band_misregistration(product, corrected, pairs, settings, *, line_step: int = 2) -> dict:
+def weak_band_misregistration(product, corrected, pairs, settings, *, line_step: int = 2,
+                              max_lines: int = 2 * _MISREG_BLOCK) -> dict:
     """Misregistration of the bands no pair uses (weakly correlated: near infrared) before / after correction.
 
     The patent (EP1843295, claims 9–11) corrects a band that correlates poorly
@@ -602,7 +603,10 @@ def weak_band_misregistration(product, corrected, pairs, settings, *, line_step:
     matched on **gradient-magnitude** images (edges coincide even where the
     radiometry is inverted, vegetation bright in the near infrared and dark
     in the red), raw bands against the knowledge prediction (before), and
-    corrected bands (after), as :func:`misregistration` does.
+    corrected bands (after), as :func:`misregistration` does. A record longer
+    than ``max_lines`` is measured on evenly spaced (centred) blocks of
+    :data:`_MISREG_BLOCK` lines adding up to about ``max_lines`` (the blocks
+    the matcher reads: the cost of a long record stays that of ``max_lines``).
 
     Returns
     -------
@@ -629,6 +633,11 @@ def weak_band_misregistration(product, corrected, pairs, settings, *, line_step:
         margin = settings.window[1] // 2 + settings.search[1] + 8
         cols = np.linspace(margin, r.pixels - 1 - margin, settings.points_per_line)
         lines = np.arange(margin, n_lines - margin, line_step, dtype=np.float64)
+        n_blocks = -(-n_lines // _MISREG_BLOCK)
+        keep = max(1, -(-int(max_lines) // _MISREG_BLOCK))
+        if keep < n_blocks:
+            pick = ((np.arange(keep) + 0.5) * n_blocks / keep).astype(int)  # centred: not the record's ends
+            lines = lines[np.isin(lines.astype(int) // _MISREG_BLOCK, pick)]
         L, C = np.meshgrid(lines, np.rint(cols), indexing="ij")
         la, ca = L.ravel(), C.ravel()
         pl, pc = sm.inverse_location(w.name, sm.direct_location(r.name, la, ca))
