@@ -354,8 +354,10 @@ def _transfer_section(pg: _Page, run: D.RunData, sc: dict, f_max: float, integra
                 t2[f"psd_delta_{a}_urad2_per_hz"] = measured[f"psd_delta_{a}"] * URAD_PER_RAD ** 2
                 t2[f"significant_{a}"] = measured[f"significant_{a}"].astype(int)
         links.append(pg.csv("transfer_measured.csv", t2))
+    ran = {a: getattr(D.integration_record(run, a), "method", None) for a in axes}
+    used = ", ".join(f"{a} {m}" for a, m in ran.items() if m and m != method)
     cap = ("Chain gain |θ̂/θ| per restored axis. Solid lines: the integration actually used "
-           f"(<code>{_e(method)}</code>), probed by re-running it on a band-limited random attitude with exact "
+           f"(<code>{_e(method)}</code>{_e(' — ' + used) if used else ''}), probed by re-running it on a band-limited random attitude with exact "
            "differentials (each pair alone, thin; all pairs fused, thick)")
     if frozen_any:
         cap += (". The method adapts its prior to the data, so it was first run on the measured differentials of "

@@ -358,20 +358,23 @@ def transfer_curves(run, taus, names, axes, *, method: str, options: dict, integ
     notes: list = []
     gaps: list = []
     frozen = False
-    shared = None
+    shared: dict = {}  # method → the probe of a filter that does not depend on the data
     for a in (axes if integrate is not None else ()):
         fz = axis_integration(run, a)
         if fz["error"]:
             notes.append(f"{a}: re-running the integration failed: {fz['error']}")
             continue
-        if not fz["frozen"] and shared is not None:
-            probes[a] = shared
+        # the method this axis ran (restoration.method = "auto" chooses per axis)
+        used = fz["record"].method if fz["record"] is not None else (method or None)
+        if not fz["frozen"] and used in shared:
+            probes[a] = shared[used]
         else:
             corr = np.asarray(run.restoration[f"correction_{a}"].values, dtype=np.float64)
             amp = float(np.nanstd(corr)) if np.isfinite(corr).any() and np.nanstd(corr) > 0 else 1e-6
-            probes[a] = integration_probe(taus, te, n, integrate=integrate, method=method or None,
+            probes[a] = integration_probe(taus, te, n, integrate=integrate, method=used,
                                           options=fz["options"], pair_names=names, amplitude_rad=amp)
-            shared = shared if fz["frozen"] else probes[a]
+            if not fz["frozen"]:
+                shared[used] = probes[a]
             notes += [f"{a}: integrating {'all pairs' if label == 'fused' else label + ' alone'} failed: {msg}"
                       for label, msg in probes[a]["errors"].items()]
         if fz["frozen"]:

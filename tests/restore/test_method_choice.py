@@ -108,3 +108,33 @@ def test_paired_improvement_on_known_residuals():
     gain, t = paired_improvement(r, rng.standard_normal(6400), w)  # as good, independently: no significance
     assert abs(gain) < 0.1 and abs(t) < 3
     assert paired_improvement(r[:50], r[:50], w[:50]) == (0.0, 0.0)  # too few samples to test
+
+
+def test_a_run_restored_with_auto_records_and_reports_the_method_each_axis_ran(tmp_path):
+    """End to end on tiny: restoration.nc records per axis the chosen method and its scores; the report's
+    transfer probe re-runs that method (not "auto", which is no integration method)."""
+    import shutil
+
+    from reports import report_data as D
+    from restore.pipeline import restore_run
+    from restore.restoration_io import read_restoration
+    from simsat.simulate import simulate
+
+    d = tmp_path / "tiny"
+    simulate("tiny", d, progress=False)
+    res = restore_run(d, progress=False, overrides={"method": "auto", "correct_images": False,
+                                                    "posterior_samples": 0})
+    assert res.method == "auto"
+    back = read_restoration(d / "restoration.nc")
+    for a in ("roll", "pitch"):
+        rec = back.integration[a]
+        assert rec.method in ("wiener", "lsq") and rec.selection["chosen"] == rec.method
+        assert set(rec.selection["scores_rad"]) == {"wiener", "lsq"}
+    run = D.load_run(d)
+    integrate, _ = D.get_integrator()
+    taus = [p.tau_s for p in back.pairs]
+    tc = D.transfer_curves(run, taus, [p.name for p in back.pairs], ["roll", "pitch"], method="auto", options={},
+                           integrate=integrate, f_max=200.0)
+    assert not [n for n in tc["notes"] if "failed" in n], tc["notes"]
+    assert set(tc["probes"]) == {"roll", "pitch"}
+    shutil.rmtree(d)
