@@ -21,38 +21,42 @@ from numba import njit, prange
 _PAD = 12
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _spline_at(coef, x, y):
+    """Cubic B-spline value of the coefficients ``coef`` at (x, y) [padded pixels], edges clamped."""
+    n_r, n_c = coef.shape
+    fx = math.floor(x)
+    fy = math.floor(y)
+    tx = x - fx
+    ty = y - fy
+    wx0 = (1.0 - tx) ** 3 / 6.0
+    wx1 = (3.0 * tx ** 3 - 6.0 * tx ** 2 + 4.0) / 6.0
+    wx2 = (-3.0 * tx ** 3 + 3.0 * tx ** 2 + 3.0 * tx + 1.0) / 6.0
+    wx3 = tx ** 3 / 6.0
+    wy0 = (1.0 - ty) ** 3 / 6.0
+    wy1 = (3.0 * ty ** 3 - 6.0 * ty ** 2 + 4.0) / 6.0
+    wy2 = (-3.0 * ty ** 3 + 3.0 * ty ** 2 + 3.0 * ty + 1.0) / 6.0
+    wy3 = ty ** 3 / 6.0
+    r0 = int(fx) - 1
+    c0 = int(fy) - 1
+    acc = 0.0
+    for a in range(4):
+        r = min(max(r0 + a, 0), n_r - 1)
+        wa = wx0 if a == 0 else (wx1 if a == 1 else (wx2 if a == 2 else wx3))
+        row = 0.0
+        for b in range(4):
+            c = min(max(c0 + b, 0), n_c - 1)
+            wb = wy0 if b == 0 else (wy1 if b == 1 else (wy2 if b == 2 else wy3))
+            row += wb * coef[r, c]
+        acc += wa * row
+    return acc
+
+
 @njit(cache=True, parallel=True, error_model="numpy")
 def _sample(coef, rows, cols, out):
-    n_r, n_c = coef.shape
     for i in prange(rows.shape[0]):
         for j in range(rows.shape[1]):
-            x = rows[i, j]
-            y = cols[i, j]
-            fx = math.floor(x)
-            fy = math.floor(y)
-            tx = x - fx
-            ty = y - fy
-            wx0 = (1.0 - tx) ** 3 / 6.0
-            wx1 = (3.0 * tx ** 3 - 6.0 * tx ** 2 + 4.0) / 6.0
-            wx2 = (-3.0 * tx ** 3 + 3.0 * tx ** 2 + 3.0 * tx + 1.0) / 6.0
-            wx3 = tx ** 3 / 6.0
-            wy0 = (1.0 - ty) ** 3 / 6.0
-            wy1 = (3.0 * ty ** 3 - 6.0 * ty ** 2 + 4.0) / 6.0
-            wy2 = (-3.0 * ty ** 3 + 3.0 * ty ** 2 + 3.0 * ty + 1.0) / 6.0
-            wy3 = ty ** 3 / 6.0
-            r0 = int(fx) - 1
-            c0 = int(fy) - 1
-            acc = 0.0
-            for a in range(4):
-                r = min(max(r0 + a, 0), n_r - 1)
-                wa = wx0 if a == 0 else (wx1 if a == 1 else (wx2 if a == 2 else wx3))
-                row = 0.0
-                for b in range(4):
-                    c = min(max(c0 + b, 0), n_c - 1)
-                    wb = wy0 if b == 0 else (wy1 if b == 1 else (wy2 if b == 2 else wy3))
-                    row += wb * coef[r, c]
-                acc += wa * row
-            out[i, j] = acc
+            out[i, j] = _spline_at(coef, rows[i, j], cols[i, j])
 
 
 def cubic_spline_resample(image: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -82,7 +86,6 @@ def _sample_nodes(coef, rl_nodes, rc_nodes, idx, w, row_offset, total, n_cols, o
     (``v`` = ``rl_nodes``, ``rc_nodes``; ``rl`` in lines of the whole band, ``row_offset`` the first
     line held in ``coef`` before padding); NaN where they fall outside ``[0, total - 1] x [0, n_cols - 1]``.
     """
-    n_r, n_c = coef.shape
     for i in prange(out.shape[0]):
         for j in range(out.shape[1]):
             k = idx[j]
@@ -92,33 +95,7 @@ def _sample_nodes(coef, rl_nodes, rc_nodes, idx, w, row_offset, total, n_cols, o
             if not (rl >= 0 and rl <= total - 1 and rc >= 0 and rc <= n_cols - 1):
                 out[i, j] = np.nan
                 continue
-            x = rl - row_offset + _PAD
-            y = rc + _PAD
-            fx = math.floor(x)
-            fy = math.floor(y)
-            tx = x - fx
-            ty = y - fy
-            wx0 = (1.0 - tx) ** 3 / 6.0
-            wx1 = (3.0 * tx ** 3 - 6.0 * tx ** 2 + 4.0) / 6.0
-            wx2 = (-3.0 * tx ** 3 + 3.0 * tx ** 2 + 3.0 * tx + 1.0) / 6.0
-            wx3 = tx ** 3 / 6.0
-            wy0 = (1.0 - ty) ** 3 / 6.0
-            wy1 = (3.0 * ty ** 3 - 6.0 * ty ** 2 + 4.0) / 6.0
-            wy2 = (-3.0 * ty ** 3 + 3.0 * ty ** 2 + 3.0 * ty + 1.0) / 6.0
-            wy3 = ty ** 3 / 6.0
-            r0 = int(fx) - 1
-            c0 = int(fy) - 1
-            acc = 0.0
-            for a in range(4):
-                r = min(max(r0 + a, 0), n_r - 1)
-                wa = wx0 if a == 0 else (wx1 if a == 1 else (wx2 if a == 2 else wx3))
-                row = 0.0
-                for b in range(4):
-                    c = min(max(c0 + b, 0), n_c - 1)
-                    wb = wy0 if b == 0 else (wy1 if b == 1 else (wy2 if b == 2 else wy3))
-                    row += wb * coef[r, c]
-                acc += wa * row
-            out[i, j] = acc
+            out[i, j] = _spline_at(coef, rl - row_offset + _PAD, rc + _PAD)
 
 
 def column_interpolation(node_cols: np.ndarray, pixels: int) -> tuple[np.ndarray, np.ndarray]:
