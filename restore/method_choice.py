@@ -98,8 +98,12 @@ def cross_validation_score(method: str, diffs, taus, dt: float, *, lags=None, si
     """
     if len(diffs) < 2:
         return float("nan")
-    r, w = _held_out_residuals(method, diffs, taus, dt, lags=lags, sigmas=sigmas, weights=weights,
-                               psd_ceiling=psd_ceiling)
+    return _score(*_held_out_residuals(method, diffs, taus, dt, lags=lags, sigmas=sigmas, weights=weights,
+                                       psd_ceiling=psd_ceiling))
+
+
+def _score(r: np.ndarray, w: np.ndarray) -> float:
+    """``sqrt(Σ w r² / Σ w)`` over the finite residuals with a positive weight (NaN if none)."""
     ok = np.isfinite(r) & (w > 0)
     return float(np.sqrt(np.sum(w[ok] * r[ok] ** 2) / np.sum(w[ok]))) if ok.any() else float("nan")
 
@@ -149,10 +153,7 @@ def choose_method(diffs, taus, dt: float, *, candidates=AUTO_CANDIDATES, **data)
     if len(diffs) < 2:
         return DEFAULT_METHOD, {}
     held = {m: _held_out_residuals(m, diffs, taus, dt, **data) for m in candidates}
-    scores = {}
-    for m, (r, w) in held.items():
-        ok = np.isfinite(r) & (w > 0)
-        scores[m] = float(np.sqrt(np.sum(w[ok] * r[ok] ** 2) / np.sum(w[ok]))) if ok.any() else float("nan")
+    scores = {m: _score(r, w) for m, (r, w) in held.items()}
     ref = candidates[0]
     better = {}
     for m in candidates[1:]:
