@@ -35,10 +35,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import check_positive, per_pair, prepare
-from .gaps import estimable_mask
-from .polynomial import _check_degree, polynomial_design
-from .spectrum import estimate_differential_noise
+from ._common import check_positive, prepare
+from .polynomial import _check_degree, finish_estimate, pair_noise, polynomial_design
 
 __all__ = ["integrate_parametric", "ParametricModel", "damped_chirp_basis", "initial_components"]
 
@@ -207,10 +205,7 @@ def integrate_parametric(diffs, taus, dt, *, components: int = 1, degree: int = 
         raise ValueError(f"components: must be an integer in [0, 4], got {components!r}")
     check_positive("max_nfev", max_nfev)
     p, n = D.shape
-    sig = per_pair(noise_std, p, "noise_std")
-    if sig is None:
-        sig = estimate_differential_noise(D, taus, dt) if n >= 64 else np.ones(p)
-    sig = np.maximum(sig, 1e-12 * max(np.nanstd(D), 1e-300))
+    sig = pair_noise(D, taus, dt, noise_std)
     t = np.arange(n) * dt
     span = t[-1] + taus.max()
     t_c, h = 0.5 * span, max(0.5 * span, dt)
@@ -249,11 +244,7 @@ def integrate_parametric(diffs, taus, dt, *, components: int = 1, degree: int = 
         q = np.zeros(0)
     model, coef, res = solve(q)
     theta = model.attitude_design(t) @ coef
-    max_gap = int(round((taus.max() if max_gap_s is None else
-                         check_positive("max_gap_s", max_gap_s, allow_zero=True)) / dt))
-    theta = np.where(estimable_mask(valid, taus, dt, max_gap=max_gap), theta, np.nan)
-    if np.isfinite(theta).any():
-        theta -= np.nanmean(theta)
+    theta = finish_estimate(theta, valid, taus, dt, max_gap_s)
     if return_details:
         return theta, {"components": model.components, "coefficients": coef, "cost": 0.5 * float(res @ res)}
     return theta

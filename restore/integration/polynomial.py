@@ -16,7 +16,7 @@ from ._common import check_positive, per_pair, prepare
 from .gaps import estimable_mask
 from .spectrum import estimate_differential_noise
 
-__all__ = ["integrate_polynomial", "polynomial_gain", "polynomial_design"]
+__all__ = ["integrate_polynomial", "polynomial_gain", "polynomial_design", "pair_noise", "finish_estimate"]
 
 
 def _check_degree(degree) -> int:
@@ -24,6 +24,27 @@ def _check_degree(degree) -> int:
     if d != degree or not 1 <= d <= 5:
         raise ValueError(f"degree: must be an integer in [1, 5], got {degree!r}")
     return d
+
+
+def pair_noise(D: np.ndarray, taus: np.ndarray, dt: float, noise_std) -> np.ndarray:
+    """Per-pair noise σ of the differentials for least-squares weights: ``noise_std`` (scalar or one per
+    pair), else estimated (1 on records shorter than 64 samples); floored away from zero."""
+    p, n = D.shape
+    sig = per_pair(noise_std, p, "noise_std")
+    if sig is None:
+        sig = estimate_differential_noise(D, taus, dt) if n >= 64 else np.ones(p)
+    return np.maximum(sig, 1e-12 * max(np.nanstd(D), 1e-300))
+
+
+def finish_estimate(theta: np.ndarray, valid: np.ndarray, taus: np.ndarray, dt: float, max_gap_s) -> np.ndarray:
+    """``theta`` NaN where the pairs do not observe it (gaps longer than ``max_gap_s``, default the longest
+    lag: :func:`restore.integration.gaps.estimable_mask`), mean removed."""
+    max_gap = int(round((taus.max() if max_gap_s is None else
+                         check_positive("max_gap_s", max_gap_s, allow_zero=True)) / dt))
+    theta = np.where(estimable_mask(valid, taus, dt, max_gap=max_gap), theta, np.nan)
+    if np.isfinite(theta).any():
+        theta -= np.nanmean(theta)
+    return theta
 
 
 def polynomial_design(t, tau: float, degree: int, *, t_c: float = 0.0, h: float = 1.0) -> np.ndarray:
@@ -56,10 +77,7 @@ def integrate_polynomial(diffs, taus, dt, *, degree: int = 3, noise_std=None,
     D, valid, taus, dt = prepare(diffs, taus, dt)
     deg = _check_degree(degree)
     p, n = D.shape
-    sig = per_pair(noise_std, p, "noise_std")
-    if sig is None:
-        sig = estimate_differential_noise(D, taus, dt) if n >= 64 else np.ones(p)
-    sig = np.maximum(sig, 1e-12 * max(np.nanstd(D), 1e-300))
+    sig = pair_noise(D, taus, dt, noise_std)
     t = np.arange(n) * dt
     t_c, h = 0.5 * (t[-1] + taus.max()), max(0.5 * (t[-1] + taus.max()), dt)
     rows, rhs = [], []
@@ -70,12 +88,7 @@ def integrate_polynomial(diffs, taus, dt, *, degree: int = 3, noise_std=None,
     coef, *_ = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)
     u = (t - t_c) / h
     theta = (u[:, None] ** np.arange(1, deg + 1)) @ coef
-    max_gap = int(round((taus.max() if max_gap_s is None else
-                         check_positive("max_gap_s", max_gap_s, allow_zero=True)) / dt))
-    theta = np.where(estimable_mask(valid, taus, dt, max_gap=max_gap), theta, np.nan)
-    if np.isfinite(theta).any():
-        theta -= np.nanmean(theta)
-    return theta
+    return finish_estimate(theta, valid, taus, dt, max_gap_s)
 
 
 def polynomial_gain(tau_s: float, *, duration_s: float, step_s: float, degree: int = 4
