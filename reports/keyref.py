@@ -31,6 +31,13 @@ MEANING = {
     "platform.ground_speed_m_s": "speed of the sub-satellite point along track [m/s]",
     "platform.off_nadir_roll_deg": "viewing tilt across track [deg]",
     "platform.off_nadir_pitch_deg": "viewing tilt along track [deg]",
+    "platform.trajectory": "straight track over a flat Earth, or a circular Keplerian orbit over a round one",
+    "platform.inclination_deg": "orbit inclination (0: equatorial; with the geostationary altitude: still over the ground) [deg]",
+    "platform.earth_radius_m": "radius of the spherical Earth under an orbit [m]",
+    "platform.scan.kind": "how the lines of sight are swept besides the platform's motion: none, spin, mirror",
+    "platform.scan.rate_rpm": "spin rate about the across-track axis [rev/min]",
+    "platform.scan.mirror_rate_deg_s": "scan mirror angular rate (the line of sight turns at twice it) [deg/s]",
+    "platform.scan.scan_frequency_hz": "mirror scan frequency: one sweep lasts 1 / (2 f) and must hold the acquisition [Hz]",
     "instrument.focal_length_m": "focal length [m]",
     "instrument.line_period_ms": "line period Te: one image line per Te [ms]",
     "instrument.pixel_pitch_um": "default detector pixel pitch [µm]",
@@ -177,6 +184,15 @@ def _record(raw: dict) -> list:
     return rec
 
 
+#: platforms whose keys the base scenario does not read (an orbit with a spin; a geostationary scan mirror)
+_PLATFORMS = (
+    {"trajectory": "orbit", "altitude_m": 694000.0, "inclination_deg": 98.0, "earth_radius_m": 6371008.8,
+     "scan": {"kind": "spin", "rate_rpm": 0.5}},
+    {"trajectory": "orbit", "altitude_m": 35793e3, "inclination_deg": 0.0,
+     "scan": {"kind": "mirror", "mirror_rate_deg_s": 0.005, "scan_frequency_hz": 0.05}},
+)
+
+
 def recorded_keys() -> dict:
     """``{table: [(key, type, default, required, constraints)]}``, jitter keys per kind."""
     base = _read_toml(builtin_scenarios()["phr_cmg"])
@@ -198,6 +214,16 @@ def recorded_keys() -> dict:
             continue
         table = k.rsplit(".", 1)[0]
         add(table, (k, kind, default, req, cons))
+    for plat in _PLATFORMS:  # the keys of the other trajectories and scans
+        raw = copy.deepcopy(base)
+        raw["platform"] = copy.deepcopy(plat)
+        raw["acquisition"]["lines"] = 64
+        raw["scene"]["dem"]["resolution_m"] = 50.0
+        raw["scene"]["texture"]["texel_m"] = 20.0
+        for key, kind, default, req, cons in _record(raw):
+            k = _norm(key)
+            if k.startswith("platform."):
+                add(k.rsplit(".", 1)[0], (k, kind, default, req, cons))
     for jk, keys in _JITTER.items():
         raw = copy.deepcopy(base)
         raw["attitude"]["jitter"] = [{"kind": jk, "axis": "roll", **keys}]

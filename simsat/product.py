@@ -27,6 +27,8 @@ import xarray as xr
 from .attitude import KNOWLEDGE_FILTER_NAMES, KNOWLEDGE_FILTER_ORDER, AttitudeSeries
 from .instrument import Detector, Instrument, Radiometry
 from .platform import Platform
+from .scan import scan_from_attrs
+from .trajectory import trajectory_from_attrs
 from .sensor_model import SensorModel
 from .terrain import Dem
 from .units import AXES
@@ -287,9 +289,7 @@ def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowled
     attrs = {
         "title": f"simsat product {sc.name}", "scenario": sc.name, "conventions": "simsat-1",
         "t0_s": float(sc.t0_s), "line_period_s": inst.line_period_s, "focal_length_m": inst.focal_length_m,
-        "altitude_m": plat.altitude_m, "ground_speed_m_s": plat.ground_speed_m_s,
-        "platform_x_at_t0_m": plat.x_at_t0_m, "platform_y_m": plat.y_m,
-        "off_nadir_roll_rad": plat.off_nadir_roll_rad, "off_nadir_pitch_rad": plat.off_nadir_pitch_rad,
+        **plat.attrs(),
         "reference_detector": sc.acquisition.reference_detector,
         "pixel_ifov_rad": inst.ifov_rad(sc.acquisition.reference_detector),
         "mtf_nyquist": inst.mtf_nyquist, "bits": inst.radiometry.bits,
@@ -410,8 +410,7 @@ def read_product(run_dir: str | Path) -> Product:
         inst = Instrument(focal_length_m=float(a["focal_length_m"]), line_period_s=float(a["line_period_s"]),
                           detectors=tuple(dets), mtf_nyquist=float(a.get("mtf_nyquist", 1.0)),
                           radiometry=Radiometry(bits=int(a.get("bits", 12))))
-        plat = Platform(altitude_m=float(a["altitude_m"]), ground_speed_m_s=float(a["ground_speed_m_s"]),
-                        x_at_t0_m=float(a["platform_x_at_t0_m"]), y_m=float(a["platform_y_m"]),
+        plat = Platform(trajectory=trajectory_from_attrs(a), scan=scan_from_attrs(a),
                         off_nadir_roll_rad=float(a.get("off_nadir_roll_rad", 0.0)),
                         off_nadir_pitch_rad=float(a.get("off_nadir_pitch_rad", 0.0)))
         kn = AttitudeSeries(time=np.asarray(ds["knowledge_time"].values, dtype=np.float64),

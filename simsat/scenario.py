@@ -23,7 +23,7 @@ from .attitude import AttitudeModel
 from .config import ScenarioError, Section
 from .instrument import Instrument, instrument_from_config
 from .platform import Platform, platform_from_config
-from .sensor_model import flat_ground_delay_s
+from .sensor_model import flat_ground_delay_s, los_body
 from .validation import run_table_checks
 
 if sys.version_info >= (3, 11):
@@ -112,7 +112,9 @@ class Scenario:
         _check_coverage(dem, self.x_range_m, self.y_range_m, dsec.key("path") if dsec.has("path") else dsec.path)
         ksec = sec.section("dem_knowledge")
         known = terrain.knowledge_dem_from_config(ksec, truth=dem, seed=self.seed)
-        return dem, known
+        # over a round Earth (an orbit) both lie on the sphere, in the local frame tangent at the scene centre
+        radius = self.platform.earth_radius_m
+        return dem.on_sphere(radius), known.on_sphere(radius)
 
     def texture(self):
         sec = self.section("scene").section("texture")
@@ -276,11 +278,19 @@ def _with_base(raw: dict, path: Path, seen: tuple = ()) -> dict:
     return merged
 
 
+#: keys that say what kind of thing a table is: a table of another kind replaces the base's, whole
+_KIND_KEYS = ("kind", "trajectory")
+
+
+def _same_kind(base: dict, over: dict) -> bool:
+    return all(over.get(k, base.get(k)) == base.get(k) for k in _KIND_KEYS)
+
+
 def _overlay(base: dict, over: dict) -> None:
-    """Tables merge key by key (a table of another ``kind`` replaces the base's); every other value replaces it."""
+    """Tables merge key by key (a table of another ``kind`` or ``trajectory`` replaces the base's); every other
+    value replaces it."""
     for k, v in over.items():
-        if isinstance(v, dict) and isinstance(base.get(k), dict) and v.get("kind", base[k].get("kind")) == \
-                base[k].get("kind"):
+        if isinstance(v, dict) and isinstance(base.get(k), dict) and _same_kind(base[k], v):
             _overlay(base[k], v)
         else:
             base[k] = copy.deepcopy(v)
@@ -349,14 +359,14 @@ def _build(raw: dict, path: Path | None, base_dir: Path) -> Scenario:
     platform = platform.centred(t_mid_s=t_mid, along_angle_rad=float(np.arctan(along.mean() / f)))
 
     # ground footprint of the acquisition (nominal geometry) + margins for jitter / relief
-    h = platform.altitude_m
-    ang = np.arctan(along / f) - platform.off_nadir_pitch_rad
     t_first, t_last = t0, t0 + (lines - 1) * instrument.line_period_s
-    xs = np.concatenate([platform.position(np.array([t_first, t_last]))[:, 0] + h * np.tan(a) for a in ang])
-    ys = []
-    for d in instrument.detectors:
-        for u in (-0.5, d.pixels - 0.5):
-            ys.append(platform.y_m + h * np.tan(platform.off_nadir_roll_rad + np.arctan(d.focal_plane_y(u) / f)))
+    msg = platform.scan.check_span(t_first, t_last)
+    if msg:
+        raise ScenarioError(f"platform.scan: {msg}")
+    corners = np.array([platform.nominal_ground_point(t, los_body(f, d.along_m, d.focal_plane_y(u)))
+                        for t in (t_first, t_mid, t_last) for d in instrument.detectors
+                        for u in (-0.5, d.pixels - 0.5)])
+    xs, ys = corners[:, 0], list(corners[:, 1])
     margin = margin_m + 0.0
     _check_extent(float(xs.max() - xs.min()), float(max(ys) - min(ys)))
     sc = Scenario(name=name, seed=seed, description=description, platform=platform, instrument=instrument,

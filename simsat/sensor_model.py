@@ -23,31 +23,12 @@ from typing import Callable
 import numpy as np
 
 from .instrument import Detector, Instrument
-from .platform import Platform
+from .platform import Platform, rotation_matrices
 
 __all__ = ["rotation_matrices", "los_body", "intersect_dem", "SensorModel", "constant_attitude",
            "offset_attitude"]
 
 AttitudeFn = Callable[[np.ndarray], tuple]
-
-
-def rotation_matrices(roll, pitch, yaw) -> np.ndarray:
-    """Body → local rotation matrices ``Rz(yaw) Ry(pitch) Rx(roll)``, shape (..., 3, 3)."""
-    roll, pitch, yaw = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (roll, pitch, yaw)))
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    cy, sy = np.cos(yaw), np.sin(yaw)
-    r = np.empty(roll.shape + (3, 3))
-    r[..., 0, 0] = cy * cp
-    r[..., 0, 1] = cy * sp * sr - sy * cr
-    r[..., 0, 2] = cy * sp * cr + sy * sr
-    r[..., 1, 0] = sy * cp
-    r[..., 1, 1] = sy * sp * sr + cy * cr
-    r[..., 1, 2] = sy * sp * cr - cy * sr
-    r[..., 2, 0] = -sp
-    r[..., 2, 1] = cp * sr
-    r[..., 2, 2] = cp * cr
-    return r
 
 
 def los_body(focal_length_m: float, x_m, y_m) -> np.ndarray:
@@ -60,21 +41,35 @@ def los_body(focal_length_m: float, x_m, y_m) -> np.ndarray:
 def flat_ground_delay_s(platform, instrument, ahead, behind) -> float:
     """Delay τ [s] after which detector ``behind`` sees what ``ahead`` saw, in the platform's nominal pointing.
 
-    Both lines of sight of the detectors' central pixels, rotated by the
-    nominal off-nadir roll and pitch, meet flat ground ``H`` below the
-    platform at along-track positions ``x = H d_x / (−d_z)``; the delay is their
-    distance over the ground speed. At nadir ``τ = H (a − b) / (f v)``; rolled
-    by φ the slant range grows and ``τ = H (a − b) / (f v cos φ)``.
+    The one place τ is computed. The line of sight of ``ahead``'s central
+    pixel meets flat ground (z = 0) at the along-track position ``x_A`` at the
+    platform's reference time (the scan's zero, the middle of the
+    acquisition); τ is the time after which ``behind``'s central pixel looks at
+    ``x_A`` — the platform's motion, its orbit and its scan (spin, mirror)
+    all enter through :meth:`Platform.nominal_ground_point`. At nadir over a
+    straight track ``τ = H (a − b) / (f v)``; rolled by φ, ``τ = H (a − b) /
+    (f v cos φ)``; swept by a scan at ``ω`` from a fixed point, ``τ = (a − b) /
+    (f ω)`` (small angles).
     """
-    r = rotation_matrices(platform.off_nadir_roll_rad, platform.off_nadir_pitch_rad, 0.0)
     f = instrument.focal_length_m
+    t_ref = platform.scan.t_ref_s
 
-    def ground_x(det) -> float:
-        d = r @ los_body(f, det.along_m, det.focal_plane_y(0.5 * (det.pixels - 1)))
-        return platform.altitude_m * d[0] / -d[2]
+    def los(det) -> np.ndarray:
+        return los_body(f, det.along_m, det.focal_plane_y(0.5 * (det.pixels - 1)))
 
-    return float((ground_x(instrument.detector(ahead)) - ground_x(instrument.detector(behind)))
-                 / platform.ground_speed_m_s)
+    a, b = instrument.detector(ahead), instrument.detector(behind)
+    x_a = float(platform.nominal_ground_point(t_ref, los(a))[0])
+    lb = los(b)
+    tau = (a.along_m - b.along_m) / f * platform.altitude_m / platform.ground_speed_m_s  # nadir guess
+    for _ in range(30):  # secant on x_B(t_ref + τ) = x_A
+        h = max(abs(tau) * 1e-3, 1e-9)
+        x0 = float(platform.nominal_ground_point(t_ref + tau, lb)[0])
+        x1 = float(platform.nominal_ground_point(t_ref + tau + h, lb)[0])
+        step = (x_a - x0) * h / (x1 - x0)
+        tau += step
+        if abs(step) < 1e-15 + 1e-13 * abs(tau):
+            break
+    return float(tau)
 
 
 def constant_attitude(roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0) -> AttitudeFn:
@@ -222,7 +217,7 @@ class SensorModel:
         lines, columns = np.broadcast_arrays(np.asarray(lines, dtype=np.float64),
                                              np.asarray(columns, dtype=np.float64))
         t = self.line_time(lines)
-        r = rotation_matrices(*att(t))
+        r = self.platform.pointing(t, *att(t))
         b = los_body(self.instrument.focal_length_m, det.along_m, det.focal_plane_y(columns))
         d = np.einsum("...ij,...j->...i", r, b)
         return self.platform.position(t), d
@@ -244,8 +239,23 @@ class SensorModel:
         return intersect_dem(dem or self.dem, o, d)
 
     # -- inverse location ----------------------------------------------------
+    def _first_guess_time(self, det: Detector, g: np.ndarray, att: AttitudeFn) -> np.ndarray:
+        """Time at which ``det``'s central line of sight, at the attitude of line 0, crosses each point's x.
+
+        Its ground x at each point's height, at t₀ and t₀ + 1 s, gives the
+        sweep rate (the track, the orbit, the scan: whatever the platform does);
+        one secant step from t₀. Newton refines it.
+        """
+        p = self.platform
+        t0 = np.array([self.t0_s, self.t0_s + 1.0])
+        r = p.pointing(t0, *att(np.full(2, self.t0_s)))
+        d = r @ los_body(self.instrument.focal_length_m, det.along_m, 0.0)  # (2, 3)
+        s = p.position(t0)
+        x = s[:, None, 0] + (s[:, None, 2] - g[None, :, 2]) * d[:, None, 0] / (-d[:, None, 2])  # (2, n)
+        return self.t0_s + (g[:, 0] - x[0]) / (x[1] - x[0])
+
     def _along_residual(self, det: Detector, g: np.ndarray, t: np.ndarray, att: AttitudeFn):
-        r = rotation_matrices(*att(t))
+        r = self.platform.pointing(t, *att(t))
         v = g - self.platform.position(t)
         b = np.einsum("...ji,...j->...i", r, v)  # R^T v
         a = det.along_m / self.instrument.focal_length_m
@@ -279,13 +289,9 @@ class SensorModel:
         g = np.asarray(ground, dtype=np.float64)
         shape = g.shape[:-1]
         g = g.reshape(-1, 3)
-        p = self.platform
         f = self.instrument.focal_length_m
         te = self.instrument.line_period_s
-        # initial guess from the nominal geometry
-        r0, p0, _ = att(np.array([self.t0_s]))
-        ang = np.arctan(det.along_m / f) - float(p0[0])
-        t = (g[:, 0] - (p.altitude_m - g[:, 2]) * np.tan(ang) - p.x_at_t0_m) / p.ground_speed_m_s
+        t = self._first_guess_time(det, g, att)
         h = 0.05 * te
         ok = np.isfinite(t)
         t = np.where(ok, t, self.t0_s)

@@ -34,7 +34,7 @@ import numpy as np
 
 from . import choose_variant
 from .scene import build_terrain_scene
-from ..sensor_model import los_body, rotation_matrices
+from ..sensor_model import los_body
 
 __all__ = ["RenderStats", "PushbroomRenderer", "ground_prefilter_kernel"]
 
@@ -158,7 +158,7 @@ class PushbroomRenderer:
         Returns arrays of shape (L, nt, C, ns², 3).
         """
         ts = self._sample_times(t_lines)
-        r = rotation_matrices(*self.attitude(ts.ravel())).reshape(ts.shape + (3, 3))
+        r = self.platform.pointing(ts.ravel(), *self.attitude(ts.ravel())).reshape(ts.shape + (3, 3))
         s = self.platform.position(ts)  # (L, nt, 3)
         b = self.body_directions(det)  # (C, S, 3)
         d = np.einsum("lnij,csj->lncsi", r, b, optimize=True)
@@ -242,7 +242,7 @@ class PushbroomRenderer:
         F64 = dr.llvm.ad.Float64 if self.variant.startswith("llvm") else dr.cuda.ad.Float64
         U32 = mi.UInt32
         ts = self._sample_times(t_lines).ravel()
-        r = rotation_matrices(*self.attitude(ts)).reshape(-1, 9)
+        r = self.platform.pointing(ts, *self.attitude(ts)).reshape(-1, 9)
         s = self.platform.position(ts)
         b = self.body_directions(det).reshape(-1, 3)
         n_cs = b.shape[0]
@@ -317,10 +317,11 @@ class PushbroomRenderer:
         # across-track extent: every detector's edge columns over the DEM height range (+ margin)
         f = self.instrument.focal_length_m
         ys = []
+        t_ref = self.platform.scan.t_ref_s
         for d in self.instrument.detectors:
             for u in (-1.0, d.pixels):
-                ang = np.arctan(d.focal_plane_y(u) / f) + self.platform.off_nadir_roll_rad
-                ys.append(self.platform.y_m + (self.platform.altitude_m - self.dem.z_min) * np.tan(ang))
+                b = los_body(f, d.along_m, d.focal_plane_y(u))
+                ys.append(float(self.platform.nominal_ground_point(t_ref, b, self.dem.z_min)[1]))
         margin = 100.0
         self._setup_tiles(min(ys) - margin, max(ys) + margin)
         along = [d.along_m for d in self.instrument.detectors]

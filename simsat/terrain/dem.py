@@ -220,6 +220,24 @@ class Dem:
         tol = 1e-6
         return ga <= xa + tol and gb >= xb - tol and ha <= ya + tol and hb >= yb - tol
 
+    def on_sphere(self, radius_m: float) -> "Dem":
+        """The heights drawn on a sphere of ``radius_m`` whose top is the local frame's origin.
+
+        The local frame is tangent to the Earth at the scene centre: a point
+        at horizontal distance ``r`` lies ``R − sqrt(R² − r²)`` (≈ r² / 2R)
+        below the tangent plane. ``inf`` returns the DEM unchanged (flat Earth).
+        """
+        if not np.isfinite(radius_m):
+            return self
+        if not radius_m > 0:
+            raise ValueError(f"radius_m: must be > 0, got {radius_m}")
+        xx, yy = np.meshgrid(self.x, self.y)
+        r2 = xx ** 2 + yy ** 2
+        if np.any(r2 >= radius_m ** 2):
+            raise ValueError("radius_m: the DEM extends beyond the sphere")
+        sag = r2 / (radius_m + np.sqrt(radius_m ** 2 - r2))  # R − sqrt(R² − r²), without cancellation
+        return Dem(self.x0_m, self.y0_m, self.dx_m, self.dy_m, self.z - sag)
+
     def with_error(self, *, noise_m: float = 0.0, bias_m: float = 0.0, correlation_m: float = 0.0,
                    seed: int = 0) -> "Dem":
         """A perturbed copy: the DEM a ground segment knows, as opposed to the truth.

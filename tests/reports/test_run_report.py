@@ -100,7 +100,7 @@ def _product(run: Path, n_lines: int, n_cols: int):
     from simsat.platform import Platform
 
     along_mean = np.mean(list(ALONG.values()))
-    plat = Platform(altitude_m=H, ground_speed_m_s=V).centred(t_mid_s=0.5 * (n_lines - 1) * TE,
+    plat = Platform.straight(altitude_m=H, ground_speed_m_s=V).centred(t_mid_s=0.5 * (n_lines - 1) * TE,
                                                              along_angle_rad=np.arctan(along_mean / F))
     t = np.arange(n_lines) * TE
     dets = list(ALONG)

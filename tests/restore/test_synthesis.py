@@ -165,7 +165,7 @@ def test_yaw_moves_a_rolled_line_along_track_by_sin_roll_times_a_pitch(roll_deg)
     roll = np.radians(roll_deg)
     n = 4000
     along = np.mean([d.along_m for d in inst.detectors])
-    plat = Platform(altitude_m=H, ground_speed_m_s=V, off_nadir_roll_rad=roll).centred(
+    plat = Platform.straight(altitude_m=H, ground_speed_m_s=V, off_nadir_roll_rad=roll).centred(
         t_mid_s=0.5 * (n - 1) * TE, along_angle_rad=np.arctan(along / F))
     sm = SensorModel(platform=plat, instrument=inst, dem=flat_dem(half_x=20000.0, half_y=20000.0),
                      attitude=constant_attitude(roll, 0.0))

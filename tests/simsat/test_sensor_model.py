@@ -16,7 +16,7 @@ V = H * PITCH / F / 4e-4  # square pixels at 0.4 ms
 def _model(dem, attitude=None, along=(0.962e-3, 0.0)):
     dets = tuple(Detector(n, "blue", a, 0.0, 400, PITCH) for n, a in zip(("A", "B"), along))
     inst = Instrument(focal_length_m=F, line_period_s=4e-4, detectors=dets)
-    pl = Platform(altitude_m=H, ground_speed_m_s=V).centred(t_mid_s=0.2, along_angle_rad=np.arctan(np.mean(along) / F))
+    pl = Platform.straight(altitude_m=H, ground_speed_m_s=V).centred(t_mid_s=0.2, along_angle_rad=np.arctan(np.mean(along) / F))
     return SensorModel(platform=pl, instrument=inst, dem=dem, attitude=attitude or constant_attitude())
 
 
@@ -139,7 +139,7 @@ def test_delay_is_the_flat_plane_projection_of_the_viewing_geometry(roll_deg, pi
     roll, pitch = np.radians(roll_deg), np.radians(pitch_deg)
     n = 4000
     along = np.mean([d.along_m for d in inst.detectors])
-    plat = Platform(altitude_m=H, ground_speed_m_s=V, off_nadir_roll_rad=roll,
+    plat = Platform.straight(altitude_m=H, ground_speed_m_s=V, off_nadir_roll_rad=roll,
                     off_nadir_pitch_rad=pitch).centred(t_mid_s=0.5 * (n - 1) * TE, along_angle_rad=np.arctan(along / F))
     sm = SensorModel(platform=plat, instrument=inst, dem=flat_dem(half_x=20000.0, half_y=5000.0),
                      attitude=constant_attitude(roll, pitch))

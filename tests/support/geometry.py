@@ -74,5 +74,5 @@ def small_instrument(*, pixels=96, along=(0.962e-3, 0.0), bands=("green", "blue"
 
 def centred_platform(instrument, n_lines):
     along = np.mean([d.along_m for d in instrument.detectors])
-    return Platform(altitude_m=H, ground_speed_m_s=V).centred(t_mid_s=0.5 * (n_lines - 1) * TE,
+    return Platform.straight(altitude_m=H, ground_speed_m_s=V).centred(t_mid_s=0.5 * (n_lines - 1) * TE,
                                                               along_angle_rad=np.arctan(along / F))
