@@ -368,7 +368,7 @@ def draw_misregistration(ax, rows: list):
         for b, val in zip(bars, v):
             if np.isfinite(val) and val > 0:
                 ax.text(b.get_x() + b.get_width() / 2, val, f"{val:.3f}", ha="center", va="bottom", fontsize=7.5)
-    ax.set_xticks(x, [r["pair"] + ("\n(weakly correlated)" if r.get("weakly_correlated") else "") for r in rows])
+    ax.set_xticks(x, [r["pair"] + ("\n(in no pair)" if r.get("weakly_correlated") else "") for r in rows])
     ax.set_ylabel("RMS of per-line shift [px]")
     ax.set_yscale("log")
     vals = [r.get(k, np.nan) for r in rows for k, _, _ in comps[1:]]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from simsat.product import clamped_attitude
+from simsat.sensor_model import tdi_mean_attitude
 from simsat.sensor_model import SensorModel
 
 from .matching import match_points_in_blocks
@@ -54,12 +55,18 @@ def resampling_grid(product, band: str, restored, *, column_step: int = 16, line
 
 
 def resampling_nodes(product, band: str, restored, *, column_step: int = 16, lines: slice | None = None,
-                     exact: bool = False, line_step: int = 32):
+                     exact: bool = False, line_step: int = 32, tdi_mean: bool = True):
     """:func:`resampling_grid` at its grid columns only → ``(rl, rc, cols)``.
 
     ``rl``, ``rc`` have shape (lines, len(cols)); ``cols`` are every
     ``column_step``-th column and the last one. Interpolating them linearly
     across columns gives :func:`resampling_grid`.
+
+    A TDI band (``tdi_stages`` N > 1) shows the attitude averaged over its N
+    stages, its lines dated at the last one: with ``tdi_mean`` (the default)
+    the raw image is located with :func:`simsat.sensor_model.tdi_mean_attitude`
+    of ``restored``; ``tdi_mean=False`` uses the attitude at the date (about
+    (N − 1) Te / 2 too late: the error CNES §3.3.4 warns about).
     """
     det = product.instrument.detector(band)
     n_lines = product.time.size
@@ -67,6 +74,8 @@ def resampling_nodes(product, band: str, restored, *, column_step: int = 16, lin
     cols = np.unique(np.r_[np.arange(0, det.pixels, column_step), det.pixels - 1]).astype(np.float64)
     sm_k = product.sensor_model()
     att_r = clamped_attitude(restored)
+    if tdi_mean and det.tdi_stages > 1:
+        att_r = tdi_mean_attitude(att_r, det.tdi_stages, product.instrument.line_period_s)
     if exact:
         sm_r = product.sensor_model(attitude=att_r)
         L, C = np.meshgrid(np.arange(sl.start, sl.stop, dtype=np.float64), cols, indexing="ij")
@@ -282,7 +291,7 @@ def correct_band_block_nodes(read, rl: np.ndarray, rc: np.ndarray, cols: np.ndar
 
 
 def correct_bands(product, *, restored, valid=None, column_step: int = 16, bands=None, path=None, compression="zlib",
-                  attrs: dict | None = None, block_lines: int = 512):
+                  attrs: dict | None = None, block_lines: int = 512, tdi_mean: bool = True):
     """Bands resampled to the knowledge geometry (cubic spline interpolation), block by block.
 
     Parameters
@@ -307,6 +316,8 @@ def correct_bands(product, *, restored, valid=None, column_step: int = 16, bands
         Global attributes of the result.
     block_lines : int
         Lines per block.
+    tdi_mean : bool
+        Locate TDI bands with the attitude averaged over their stages (:func:`resampling_nodes`).
 
     Returns
     -------
@@ -349,7 +360,8 @@ def correct_bands(product, *, restored, valid=None, column_step: int = 16, bands
 
             for a in range(0, n_lines, block_lines):
                 sl = slice(a, min(n_lines, a + block_lines))
-                rl, rc, cols = resampling_nodes(product, name, restored, column_step=column_step, lines=sl)
+                rl, rc, cols = resampling_nodes(product, name, restored, column_step=column_step, lines=sl,
+                                                tdi_mean=tdi_mean)
                 out = correct_band_block_nodes(read, rl, rc, cols, pixels=det.pixels, n_lines=n_lines)
                 if valid is not None:
                     out[~valid[sl]] = np.nan

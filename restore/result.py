@@ -151,7 +151,7 @@ class RestorationResult:
         corr = ", ".join(f"{a} {np.nanstd(self.correction[a]) / px:.3f} px rms" for a in self.settings.axes)
         lines.append(f"  correction applied: {corr}")
         for k, v in (self.misregistration or {}).items():
-            weak = (f" (weakly correlated, corrected from the restored attitude; gradient matching against "
+            weak = (f" (in no pair, corrected from the restored attitude; gradient matching against "
                     f"{v.get('reference_band')}, {100 * v.get('valid_fraction', 0):.0f} % of points)"
                     if v.get("weakly_correlated") else "")
             lines.append(f"  misregistration {k}{weak}: before {v['before_px']:.3f} px, after {v['after_px']:.3f} px "

@@ -41,6 +41,7 @@ class RestorationSettings:
     correct_images: bool = True
     correction_column_step: int = 64
     corrected_compression: str = "zlib"
+    tdi_mean_attitude: bool = True
     min_coverage: float = 0.05
     posterior_samples: int = 8
     knowledge_prior: bool = True
@@ -127,6 +128,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.correction_column_step = sec.integer("correction_column_step", s.correction_column_step, ge=1)
     s.corrected_compression = sec.string("corrected_compression", s.corrected_compression,
                                          choices=tuple(CORRECTED_COMPRESSION))
+    s.tdi_mean_attitude = sec.boolean("tdi_mean_attitude", s.tdi_mean_attitude)
     s.min_coverage = sec.number("min_coverage", s.min_coverage, ge=0, le=1)
     s.knowledge_prior = sec.boolean("knowledge_prior", s.knowledge_prior)
     rm = sec.raw("rematch", "auto")

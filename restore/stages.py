@@ -629,7 +629,7 @@ def correct_images(product: Product, t_line, restored: dict, knowledge: dict, pa
     valid = np.all([np.isfinite(restored[a]) for a in settings.axes], axis=0)
     corrected = correct_bands(product, restored=attitude_series(t_line, rest_fill), valid=valid,
                               column_step=settings.correction_column_step, path=path, attrs=attrs,
-                              compression=settings.corrected_compression)
+                              compression=settings.corrected_compression, tdi_mean=settings.tdi_mean_attitude)
     mis = misregistration(product, corrected, pairs, settings)
     mis.update(weak_band_misregistration(product, corrected, pairs, settings))
     return corrected, mis

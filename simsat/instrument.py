@@ -45,6 +45,13 @@ class Detector:
         Number of pixels (image columns).
     pitch_m : float
         Pixel pitch [m].
+    tdi_stages : int
+        Time-delay-integration stages (1: a single line). A TDI detector
+        integrates each pixel over ``tdi_stages`` rows, the charge moving
+        backwards one row (one pitch) per line period with the image: row
+        ``along_m + k pitch`` sees the ground point at ``t − k Te``, and the
+        pixel is dated at the *last* stage (row ``along_m``, time ``t``), not at
+        the middle of its integration (CNES §3.3.4, the PHR PAN band).
     """
 
     name: str
@@ -53,6 +60,7 @@ class Detector:
     across_m: float
     pixels: int
     pitch_m: float
+    tdi_stages: int = 1
 
     def focal_plane_y(self, columns) -> np.ndarray:
         """Across-track focal-plane coordinate [m] of (fractional) columns."""
@@ -177,9 +185,13 @@ def instrument_from_config(sec: Section) -> Instrument:
         if pitch is None:
             raise ds.error("pixel_pitch_um", "missing (required, or set instrument.pixel_pitch_um)")
         pitch *= 1e-6
+        tdi = ds.integer("tdi_stages", 1, ge=1, le=256)
         if abs(along) > height / 2:
             raise ds.error("along_track_mm", f"detector off the focal plane: |{along*1e3:g}| mm > "
                            f"focal_plane_height_mm/2 = {height*1e3/2:g} mm")
+        if abs(along + (tdi - 1) * pitch) > height / 2:
+            raise ds.error("tdi_stages", f"the {tdi} TDI rows reach {(along + (tdi - 1) * pitch) * 1e3:g} mm along "
+                           f"track, off the focal plane (focal_plane_height_mm/2 = {height*1e3/2:g} mm)")
         half_len = pixels * pitch / 2
         if abs(across) + half_len > width / 2 + 1e-12:
             raise ds.error("pixels", f"detector off the focal plane: it spans {abs(across)*1e3 + half_len*1e3:g} mm "
@@ -187,7 +199,8 @@ def instrument_from_config(sec: Section) -> Instrument:
         ds.finish()
         if any(d.name == name for d in dets):
             raise ds.error("name", f"duplicate detector name {name!r}")
-        dets.append(Detector(name=name, band=band, along_m=along, across_m=across, pixels=pixels, pitch_m=pitch))
+        dets.append(Detector(name=name, band=band, along_m=along, across_m=across, pixels=pixels, pitch_m=pitch,
+                             tdi_stages=tdi))
     sec.finish()
     return Instrument(focal_length_m=f, line_period_s=te, detectors=tuple(dets), focal_plane_width_m=width,
                       focal_plane_height_m=height, mtf_nyquist=mtf, time_subsamples=nt, spatial_subsamples=ns,

@@ -264,6 +264,8 @@ def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowled
     data["detector_across_m"] = ("detector", np.array([d.across_m for d in dets]), {"units": "m"})
     data["detector_pixels"] = ("detector", np.array([d.pixels for d in dets], dtype=np.int32))
     data["detector_pitch_m"] = ("detector", np.array([d.pitch_m for d in dets]), {"units": "m"})
+    data["detector_tdi_stages"] = ("detector", np.array([d.tdi_stages for d in dets], dtype=np.int32),
+                                   {"long_name": "TDI stages (1: a single line); a TDI line is dated at its last stage"})
     data["knowledge_roll"] = ("knowledge_time", kn.roll, {"units": "rad", "long_name": "AOCS knowledge roll"})
     data["knowledge_pitch"] = ("knowledge_time", kn.pitch, {"units": "rad"})
     data["knowledge_yaw"] = ("knowledge_time", kn.yaw, {"units": "rad"})
@@ -406,7 +408,9 @@ def read_product(run_dir: str | Path) -> Product:
                                  along_m=float(ds["detector_along_m"].values[i]),
                                  across_m=float(ds["detector_across_m"].values[i]),
                                  pixels=int(ds["detector_pixels"].values[i]),
-                                 pitch_m=float(ds["detector_pitch_m"].values[i])))
+                                 pitch_m=float(ds["detector_pitch_m"].values[i]),
+                                 tdi_stages=int(ds["detector_tdi_stages"].values[i]) if "detector_tdi_stages" in ds
+                                 else 1))
         inst = Instrument(focal_length_m=float(a["focal_length_m"]), line_period_s=float(a["line_period_s"]),
                           detectors=tuple(dets), mtf_nyquist=float(a.get("mtf_nyquist", 1.0)),
                           radiometry=Radiometry(bits=int(a.get("bits", 12))))

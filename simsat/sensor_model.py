@@ -26,7 +26,7 @@ from .instrument import Detector, Instrument
 from .platform import Platform, rotation_matrices
 
 __all__ = ["rotation_matrices", "los_body", "intersect_dem", "SensorModel", "constant_attitude",
-           "offset_attitude"]
+           "offset_attitude", "tdi_mean_attitude", "flat_ground_delay_s"]
 
 AttitudeFn = Callable[[np.ndarray], tuple]
 
@@ -85,6 +85,30 @@ def offset_attitude(attitude: AttitudeFn, droll: float = 0.0, dpitch: float = 0.
     def fn(t):
         r, p, y = attitude(t)
         return (np.asarray(r) + droll, np.asarray(p) + dpitch, np.asarray(y) + dyaw)
+    return fn
+
+
+def tdi_mean_attitude(attitude: AttitudeFn, stages: int, line_period_s: float) -> AttitudeFn:
+    """The attitude a TDI line dated ``t`` shows: the mean of ``attitude(t − k Te)`` over its ``stages``.
+
+    A TDI pixel integrates stage k (row ``along_m + k pitch``) at ``t − k Te``;
+    under jitter its image position is the mean of the stages' positions, i.e.
+    (to first order in the attitude) that of the mean attitude. Using the
+    attitude at the date instead is off by about ``(N − 1) Te / 2`` of delay
+    (CNES §3.3.4: "the correction Pan signal must be out of phase with the
+    correction XS signal").
+    """
+    if stages <= 1:
+        return attitude
+    offsets = np.arange(stages) * float(line_period_s)
+
+    def fn(t):
+        t = np.asarray(t, dtype=np.float64)
+        acc = [np.zeros(t.shape), np.zeros(t.shape), np.zeros(t.shape)]
+        for dt in offsets:
+            for i, a in enumerate(attitude(t - dt)):
+                acc[i] = acc[i] + np.asarray(a)
+        return tuple(a / stages for a in acc)
     return fn
 
 

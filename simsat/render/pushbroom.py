@@ -28,7 +28,7 @@ block sees.
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -269,7 +269,20 @@ class PushbroomRenderer:
         return ray, n, (float(xs.min()) - 20.0, float(xs.max()) + 20.0)
 
     def render_block(self, det, t_lines: np.ndarray) -> np.ndarray:
-        """Render lines at times ``t_lines`` for one detector → (L, C) float32 radiance."""
+        """Render lines at times ``t_lines`` for one detector → (L, C) float32 radiance.
+
+        A TDI detector (``tdi_stages`` N > 1) is the mean of its N rows: row
+        ``along_m + k pitch`` at ``t − k Te`` (the charge moves with the image;
+        the line is dated at its last stage, ``k = 0``).
+        """
+        if det.tdi_stages > 1:
+            te = self.instrument.line_period_s
+            acc = None
+            for k in range(det.tdi_stages):
+                row = replace(det, along_m=det.along_m + k * det.pitch_m, tdi_stages=1)
+                img = self.render_block(row, t_lines - k * te)
+                acc = img.astype(np.float64) if acc is None else acc + img
+            return (acc / det.tdi_stages).astype(np.float32)
         import drjit as dr
         import mitsuba as mi
 
