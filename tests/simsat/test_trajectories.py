@@ -207,3 +207,34 @@ def test_mirror_sweep_must_hold_the_acquisition(tmp_path):
     with pytest.raises(ScenarioError, match="platform.scan.*one mirror sweep"):
         _scenario(tmp_path, 'trajectory = "orbit"\naltitude_m = 35786000.0\ninclination_deg = 0.0\n'
                             '[platform.scan]\nkind = "mirror"\nmirror_rate_deg_s = 0.01\nscan_frequency_hz = 50.0')
+
+
+# --------------------------------------------------------------------------- products
+@pytest.mark.parametrize("name,pan", [("leo_spin", False), ("geo_mirror", True)])
+def test_product_reads_back_the_trajectory_scan_tdi_and_delays(tmp_path, name, pan):
+    """A rendered product of each variant gives the ground segment the scenario's geometry back."""
+    from simsat.product import read_product
+    from simsat.scenario import load_scenario
+    from simsat.simulate import simulate
+
+    ov = {"acquisition": {"lines": 40}, "instrument": {"pixels": 48},
+          "scene": {"dem": {"resolution_m": 50.0}}}
+    if pan:  # a TDI band in front
+        ov["instrument"]["detectors"] = {0: {"tdi_stages": 5}}
+    sc = load_scenario(name, overrides=ov)
+    simulate(sc, tmp_path / "r", progress=False)
+    p = read_product(tmp_path / "r")
+    assert type(p.platform.trajectory) is type(sc.platform.trajectory)
+    assert type(p.platform.scan) is type(sc.platform.scan)
+    t = sc.line_times[::7]
+    np.testing.assert_allclose(p.platform.position(t), sc.platform.position(t), atol=1e-6)
+    np.testing.assert_allclose(p.platform.pointing(t, 1e-5, 2e-5, 0.0), sc.platform.pointing(t, 1e-5, 2e-5, 0.0),
+                               atol=1e-14)
+    assert [d.tdi_stages for d in p.instrument.detectors] == [d.tdi_stages for d in sc.instrument.detectors]
+    assert p.instrument.detectors[0].tdi_stages == (5 if pan else 1)
+    for a, b in (("B1", "B0"), ("B0", "B2")):
+        assert p.delay_s(a, b) == pytest.approx(sc.delay_s(a, b), rel=1e-12)
+    stored = dict(zip([str(s) for s in p.ds["pair"].values], p.ds["delay_s"].values))
+    assert stored["B1/B0"] == pytest.approx(7.4e-3, rel=2e-4)
+    # the ground segment's ephemeris is the platform's
+    np.testing.assert_allclose(p.ds["ephemeris"].values, sc.platform.position(sc.line_times), atol=1e-6)
