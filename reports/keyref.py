@@ -32,6 +32,8 @@ MEANING = {
     "platform.off_nadir_roll_deg": "viewing tilt across track [deg]",
     "platform.off_nadir_pitch_deg": "viewing tilt along track [deg]",
     "restoration.tdi_mean_attitude": "locate a TDI band with the attitude averaged over its stages (true) or at its line date, the last stage (false: CNES §3.3.4's error)",
+    "instrument.detectors[].rows": "rows of a 2-D matrix detector taking frames (1: a line); needs acquisition.frame_period_ms",
+    "acquisition.frame_period_ms": "a matrix detector takes a frame every this [ms] (0: push-broom lines); acquisition.lines then counts frames",
     "instrument.detectors[].tdi_stages": "time-delay-integration stages; the line is dated at the last stage (1: a single line)",
     "platform.trajectory": "straight track over a flat Earth, or a circular Keplerian orbit over a round one",
     "platform.inclination_deg": "orbit inclination (0: equatorial; with the geostationary altitude: still over the ground) [deg]",

@@ -33,6 +33,7 @@ import numpy as np
 from reports import plotting as P
 from reports import report_data as D
 from reports import report_plots as RP
+from reports.frames_report import is_frames_run, make_frames_report
 from simsat.product import atomic_write_bytes, atomic_write_json
 from simsat.units import URAD_PER_RAD
 
@@ -664,6 +665,8 @@ def make_run_report(run_dir, *, out_dir=None, integrator: Callable | None = None
     """
     if scene_3d not in ("auto", "pyvista", "matplotlib", "none"):
         raise ValueError(f"scene_3d: must be auto, pyvista, matplotlib or none; got {scene_3d!r}")
+    if is_frames_run(run_dir):  # a matrix detector's frames: their own, shorter report
+        return make_frames_report(run_dir, out_dir=out_dir)
     t_start = _time.perf_counter()
     run_dir = Path(run_dir)
     out = Path(out_dir) if out_dir is not None else run_dir / "report"

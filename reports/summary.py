@@ -41,6 +41,10 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
         µrad for yaw], coverage, then ``PASS``/``FAIL`` and the reason, or why
         the requirement cannot be checked.
     """
+    from .frames_report import frames_summary, is_frames_run
+
+    if is_frames_run(run_dir):
+        return frames_summary(run_dir, report_path=report_path)
     run = D.load_run(run_dir)
     hd = D.headline(run)
     axes_r = D.restored_axes(run)

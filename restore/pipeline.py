@@ -75,6 +75,8 @@ def restore_run(run_dir: str | Path, *, overrides: dict | None = None, progress:
     # provenance: which product and settings the outputs come from (checked by the report)
     pid = str(product.ds.attrs.get("product_id", "")) or content_id(str(product.path))
     rid = content_id(pid, settings_dict(settings))
+    if product.is_frames:
+        return _restore_frames_run(run_dir, product, settings, pid, rid, progress=progress)
     with RunLock(run_dir, "restore"):
         part = temporary_path(run_dir / "corrected.nc")  # written block by block, renamed when complete
         try:
@@ -93,5 +95,19 @@ def restore_run(run_dir: str | Path, *, overrides: dict | None = None, progress:
                 (run_dir / "corrected.nc").unlink()  # simsat's own output of an earlier restoration: stale now
         finally:
             part.unlink(missing_ok=True)
+        res.path = atomic_write_dataset(ds, run_dir / "restoration.nc")
+    return res
+
+
+def _restore_frames_run(run_dir: Path, product, settings, pid: str, rid: str, *, progress: bool):
+    """A matrix detector's frames: :func:`restore.frames.restore_frames`, written as restoration.nc."""
+    from .frames import frames_restoration_dataset, restore_frames
+
+    with RunLock(run_dir, "restore"):
+        res = restore_frames(product, settings, progress=progress)
+        ds = frames_restoration_dataset(res)
+        ds.attrs.update(product_id=pid, restoration_id=rid)
+        if (run_dir / "corrected.nc").is_file():
+            (run_dir / "corrected.nc").unlink()  # simsat's own output of an earlier restoration: stale now
         res.path = atomic_write_dataset(ds, run_dir / "restoration.nc")
     return res

@@ -52,6 +52,9 @@ class Detector:
         ``along_m + k pitch`` sees the ground point at ``t − k Te``, and the
         pixel is dated at the *last* stage (row ``along_m``, time ``t``), not at
         the middle of its integration (CNES §3.3.4, the PHR PAN band).
+    rows : int
+        Rows of a 2-D matrix detector taking frames (1: a line;
+        :mod:`simsat.frames`); ``along_m`` is then the matrix centre.
     """
 
     name: str
@@ -61,6 +64,7 @@ class Detector:
     pixels: int
     pitch_m: float
     tdi_stages: int = 1
+    rows: int = 1
 
     def focal_plane_y(self, columns) -> np.ndarray:
         """Across-track focal-plane coordinate [m] of (fractional) columns."""
@@ -186,9 +190,15 @@ def instrument_from_config(sec: Section) -> Instrument:
             raise ds.error("pixel_pitch_um", "missing (required, or set instrument.pixel_pitch_um)")
         pitch *= 1e-6
         tdi = ds.integer("tdi_stages", 1, ge=1, le=256)
+        rows = ds.integer("rows", 1, ge=1, le=4096)
+        if rows > 1 and tdi > 1:
+            raise ds.error("rows", "a matrix detector (rows > 1) has no TDI stages; set one of rows, tdi_stages")
         if abs(along) > height / 2:
             raise ds.error("along_track_mm", f"detector off the focal plane: |{along*1e3:g}| mm > "
                            f"focal_plane_height_mm/2 = {height*1e3/2:g} mm")
+        if rows > 1 and abs(along) + (rows - 1) / 2 * pitch > height / 2:
+            raise ds.error("rows", f"the {rows}-row matrix spans {(abs(along) + (rows - 1) / 2 * pitch) * 1e3:g} mm "
+                           f"from the axis, off the focal plane (focal_plane_height_mm/2 = {height*1e3/2:g} mm)")
         if abs(along + (tdi - 1) * pitch) > height / 2:
             raise ds.error("tdi_stages", f"the {tdi} TDI rows reach {(along + (tdi - 1) * pitch) * 1e3:g} mm along "
                            f"track, off the focal plane (focal_plane_height_mm/2 = {height*1e3/2:g} mm)")
@@ -200,7 +210,7 @@ def instrument_from_config(sec: Section) -> Instrument:
         if any(d.name == name for d in dets):
             raise ds.error("name", f"duplicate detector name {name!r}")
         dets.append(Detector(name=name, band=band, along_m=along, across_m=across, pixels=pixels, pitch_m=pitch,
-                             tdi_stages=tdi))
+                             tdi_stages=tdi, rows=rows))
     sec.finish()
     return Instrument(focal_length_m=f, line_period_s=te, detectors=tuple(dets), focal_plane_width_m=width,
                       focal_plane_height_m=height, mtf_nyquist=mtf, time_subsamples=nt, spatial_subsamples=ns,

@@ -178,6 +178,11 @@ class Product:
         return np.asarray(self.ds["time"].values, dtype=np.float64)
 
     @property
+    def is_frames(self) -> bool:
+        """A matrix detector's frames (:mod:`simsat.frames`): each "line" is a frame of (row, column)."""
+        return str(self.ds.attrs.get("acquisition", "pushbroom")) == "frames"
+
+    @property
     def band_names(self) -> list[str]:
         return [d.name for d in self.instrument.detectors]
 
@@ -264,6 +269,8 @@ def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowled
     data["detector_across_m"] = ("detector", np.array([d.across_m for d in dets]), {"units": "m"})
     data["detector_pixels"] = ("detector", np.array([d.pixels for d in dets], dtype=np.int32))
     data["detector_pitch_m"] = ("detector", np.array([d.pitch_m for d in dets]), {"units": "m"})
+    data["detector_rows"] = ("detector", np.array([d.rows for d in dets], dtype=np.int32),
+                             {"long_name": "rows of a matrix detector (1: a line); its frames are the lines"})
     data["detector_tdi_stages"] = ("detector", np.array([d.tdi_stages for d in dets], dtype=np.int32),
                                    {"long_name": "TDI stages (1: a single line); a TDI line is dated at its last stage"})
     data["knowledge_roll"] = ("knowledge_time", kn.roll, {"units": "rad", "long_name": "AOCS knowledge roll"})
@@ -292,6 +299,8 @@ def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowled
         "title": f"simsat product {sc.name}", "scenario": sc.name, "conventions": "simsat-1",
         "t0_s": float(sc.t0_s), "line_period_s": inst.line_period_s, "focal_length_m": inst.focal_length_m,
         **plat.attrs(),
+        **({"acquisition": "frames", "frame_period_s": float(sc.acquisition.frame_period_s)}
+           if sc.acquisition.is_frames else {"acquisition": "pushbroom"}),
         "reference_detector": sc.acquisition.reference_detector,
         "pixel_ifov_rad": inst.ifov_rad(sc.acquisition.reference_detector),
         "mtf_nyquist": inst.mtf_nyquist, "bits": inst.radiometry.bits,
@@ -372,14 +381,18 @@ def check_product(ds, path) -> None:
         raise ProductError(f"{path}: variable 'knowledge_time' must increase strictly")
     names = [str(x) for x in np.atleast_1d(ds["detector"].values)]
     pixels = np.atleast_1d(ds["detector_pixels"].values)
+    rows = np.atleast_1d(ds["detector_rows"].values) if "detector_rows" in ds else np.ones(len(names), int)
+    frames = str(ds.attrs.get("acquisition", "pushbroom")) == "frames"
     for i, name in enumerate(names):
         key = f"image_{name}"
         if key not in ds.variables:
             raise ProductError(f"{path}: no variable {key!r} for detector {name!r}")
         shape = tuple(int(n) for n in ds[key].shape)
-        if len(shape) != 2 or shape[0] != t.size or shape[1] != int(pixels[i]):
-            raise ProductError(f"{path}: variable {key!r} has shape {shape}; expected ({t.size} lines, "
-                               f"{int(pixels[i])} columns) from 'time' and 'detector_pixels'")
+        want = (t.size, int(rows[i]), int(pixels[i])) if frames else (t.size, int(pixels[i]))
+        if shape != want:
+            what = "frames, rows, columns" if frames else "lines, columns"
+            raise ProductError(f"{path}: variable {key!r} has shape {shape}; expected {want} ({what}) from 'time', "
+                               f"{'detector_rows, ' if frames else ''}'detector_pixels'")
 
 
 def clamped_attitude(series):
@@ -410,7 +423,8 @@ def read_product(run_dir: str | Path) -> Product:
                                  pixels=int(ds["detector_pixels"].values[i]),
                                  pitch_m=float(ds["detector_pitch_m"].values[i]),
                                  tdi_stages=int(ds["detector_tdi_stages"].values[i]) if "detector_tdi_stages" in ds
-                                 else 1))
+                                 else 1,
+                                 rows=int(ds["detector_rows"].values[i]) if "detector_rows" in ds else 1))
         inst = Instrument(focal_length_m=float(a["focal_length_m"]), line_period_s=float(a["line_period_s"]),
                           detectors=tuple(dets), mtf_nyquist=float(a.get("mtf_nyquist", 1.0)),
                           radiometry=Radiometry(bits=int(a.get("bits", 12))))

@@ -43,6 +43,12 @@ class Acquisition:
     block_lines: int
     reference_detector: str
     t0_s: float = 0.0
+    #: > 0: a matrix detector takes a frame every ``frame_period_s`` and ``lines`` counts frames (simsat.frames)
+    frame_period_s: float = 0.0
+
+    @property
+    def is_frames(self) -> bool:
+        return self.frame_period_s > 0
 
 
 @dataclass
@@ -79,12 +85,18 @@ class Scenario:
         return self.acquisition.t0_s
 
     @property
+    def sample_period_s(self) -> float:
+        """Time between successive product lines: the line period, or the frame period of a matrix."""
+        return self.acquisition.frame_period_s or self.line_period_s
+
+    @property
     def t_end_s(self) -> float:
-        return self.t0_s + (self.acquisition.lines - 1) * self.line_period_s
+        return self.t0_s + (self.acquisition.lines - 1) * self.sample_period_s
 
     @property
     def line_times(self) -> np.ndarray:
-        return self.t0_s + np.arange(self.acquisition.lines) * self.line_period_s
+        """Times of the product's lines (of its frames for a matrix detector) [s]."""
+        return self.t0_s + np.arange(self.acquisition.lines) * self.sample_period_s
 
     def delay_s(self, ahead: str, behind: str) -> float:
         """Delay τ [s] after which ``behind`` sees what ``ahead`` saw, for the nominal viewing geometry
@@ -343,8 +355,11 @@ def _build(raw: dict, path: Path | None, base_dir: Path) -> Scenario:
     ref = acq.string("reference_detector", instrument.detectors[0].name, choices=instrument.names)
     t0 = acq.number("start_time_s", 0.0, ge=-1e9, le=1e9)
     margin_m = acq.number("scene_margin_m", 300.0, ge=0, le=1e5)
+    frame_period = acq.number("frame_period_ms", 0.0, ge=0, le=1e5) * 1e-3
     acq.finish()
-    acquisition = Acquisition(lines=lines, block_lines=block, reference_detector=ref, t0_s=t0)
+    acquisition = Acquisition(lines=lines, block_lines=block, reference_detector=ref, t0_s=t0,
+                              frame_period_s=frame_period)
+    _check_matrix(acq, instrument, acquisition)
 
     # sections read by later stages: only their presence/type is checked here
     for k in ("scene", "attitude", "restoration"):
@@ -355,16 +370,25 @@ def _build(raw: dict, path: Path | None, base_dir: Path) -> Scenario:
     # centre the platform: the mean detector line of sight hits (0, 0) at mid-acquisition
     f = instrument.focal_length_m
     along = np.array([d.along_m for d in instrument.detectors])
-    t_mid = t0 + 0.5 * (lines - 1) * instrument.line_period_s
+    t_mid = t0 + 0.5 * (lines - 1) * (frame_period or instrument.line_period_s)
     platform = platform.centred(t_mid_s=t_mid, along_angle_rad=float(np.arctan(along.mean() / f)))
 
+    if acquisition.is_frames:
+        from .frames import rows_per_frame
+        det = instrument.detectors[0]
+        adv = rows_per_frame(platform, det, f, frame_period)
+        if not adv <= 0.75 * det.rows:
+            raise ScenarioError(f"acquisition.frame_period_ms: the ground advances {adv:.1f} rows per frame, more than "
+                                f"3/4 of the {det.rows}-row matrix: successive frames must overlap (the patent: "
+                                f"generally by half); use a shorter frame period or more rows")
     # ground footprint of the acquisition (nominal geometry) + margins for jitter / relief
-    t_first, t_last = t0, t0 + (lines - 1) * instrument.line_period_s
+    t_first, t_last = t0, t0 + (lines - 1) * (frame_period or instrument.line_period_s)
     msg = platform.scan.check_span(t_first, t_last)
     if msg:
         raise ScenarioError(f"platform.scan: {msg}")
-    corners = np.array([platform.nominal_ground_point(t, los_body(f, d.along_m, d.focal_plane_y(u)))
+    corners = np.array([platform.nominal_ground_point(t, los_body(f, a, d.focal_plane_y(u)))
                         for t in (t_first, t_mid, t_last) for d in instrument.detectors
+                        for a in (d.along_m + (d.rows - 1) / 2 * d.pitch_m, d.along_m - (d.rows - 1) / 2 * d.pitch_m)
                         for u in (-0.5, d.pixels - 0.5)])
     xs, ys = corners[:, 0], list(corners[:, 1])
     margin = margin_m + 0.0
@@ -376,6 +400,21 @@ def _build(raw: dict, path: Path | None, base_dir: Path) -> Scenario:
                   footprint_m=((float(xs.min()), float(xs.max())), (float(min(ys)), float(max(ys)))))
     run_table_checks(sc)  # the tables of later stages (restore registers [restoration])
     return sc
+
+
+def _check_matrix(acq: Section, instrument, acquisition: Acquisition) -> None:
+    """A matrix detector takes frames (``frame_period_ms``); frames need exactly one matrix detector."""
+    matrices = [d for d in instrument.detectors if d.rows > 1]
+    if acquisition.is_frames:
+        if len(instrument.detectors) != 1 or not matrices:
+            raise acq.error("frame_period_ms", "frames are taken by one matrix detector: give exactly one "
+                            "[[instrument.detectors]] with rows > 1")
+        if acquisition.frame_period_s < instrument.line_period_s:
+            raise acq.error("frame_period_ms", f"a frame period of {acquisition.frame_period_s * 1e3:g} ms is shorter "
+                            f"than the exposure (instrument.line_period_ms = {instrument.line_period_s * 1e3:g})")
+    elif matrices:
+        raise acq.error("frame_period_ms", f"detector {matrices[0].name!r} is a matrix (rows = {matrices[0].rows}): "
+                        "set the frame period")
 
 
 # --------------------------------------------------------------------------- resource budget
@@ -409,7 +448,7 @@ def _check_resources(sc: Scenario) -> None:
     """
     inst = sc.instrument
     lines = sc.acquisition.lines
-    pixels = sum(d.pixels for d in inst.detectors)
+    pixels = sum(d.pixels * d.rows * d.tdi_stages for d in inst.detectors)  # per product line (frame)
     rays = float(lines) * pixels * inst.time_subsamples * inst.spatial_subsamples ** 2
     if rays > MAX_RAYS:
         raise ScenarioError(f"acquisition.lines: {lines} lines × {pixels} pixels of all bands × "

@@ -205,6 +205,15 @@ def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> Simulati
     return SimulationResult(out_dir=out_dir, timings=timings, render_stats=render_stats, replaced=replaced)
 
 
+def _finish(bar, timings: dict, t_render: float, t_radio: float, t_write: float) -> None:
+    """Close the progress bar; record the render, radiometry and write times."""
+    if bar is not None:
+        bar.close()
+    timings["render_s"] = t_render
+    timings["radiometry_s"] = t_radio
+    timings["write_s"] = timings.get("write_s", 0.0) + t_write
+
+
 def _render_images_into(sc: Scenario, renderer, path: Path, t_lines, timings: dict, *, progress: bool) -> None:
     """Render the acquisition block by block, apply the radiometry, append each block to ``path``.
 
@@ -215,6 +224,8 @@ def _render_images_into(sc: Scenario, renderer, path: Path, t_lines, timings: di
     """
     import netCDF4
 
+    if sc.acquisition.is_frames:
+        return _render_frames_into(sc, renderer, path, t_lines, timings, progress=progress)
     inst = sc.instrument
     dets = inst.detectors
     block = sc.acquisition.block_lines
@@ -251,8 +262,53 @@ def _render_images_into(sc: Scenario, renderer, path: Path, t_lines, timings: di
                 t = _time.perf_counter()
                 t_write += t - t2
     finally:
-        if bar is not None:
-            bar.close()
-    timings["render_s"] = t_render
-    timings["radiometry_s"] = t_radio
-    timings["write_s"] = timings.get("write_s", 0.0) + t_write
+        _finish(bar, timings, t_render, t_radio, t_write)
+
+
+def _render_frames_into(sc: Scenario, renderer, path: Path, t_frames, timings: dict, *, progress: bool) -> None:
+    """The frames of the matrix detector (frame, row, column), rendered row by row over blocks of frames.
+
+    Noise draws are seeded per (frame, row): the same as if each row of each
+    frame were a line of its own.
+    """
+    import netCDF4
+
+    from .frames import row_detector
+
+    inst = sc.instrument
+    det = inst.detectors[0]
+    n = len(t_frames)
+    block = max(1, min(n, sc.acquisition.block_lines))
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=n * det.rows, unit="row", desc=f"render {sc.name} (frames)", file=sys.stderr,
+                   dynamic_ncols=True)
+    t_render = t_radio = t_write = 0.0
+    try:
+        with netCDF4.Dataset(str(path), "a") as nc:
+            nc.createDimension("row", det.rows)
+            nc.createDimension("column", det.pixels)
+            v = nc.createVariable(f"image_{det.name}", "u2", ("line", "row", "column"), zlib=True, complevel=4,
+                                  shuffle=True, chunksizes=(1, det.rows, det.pixels), fill_value=False)
+            v.setncatts({"units": "DN", "band": det.band, "detector": det.name,
+                         "long_name": f"raw frames of matrix detector {det.name} ({det.band}): frame, row, column"})
+            for a in range(0, n, block):
+                sl = slice(a, min(n, a + block))
+                t = _time.perf_counter()
+                rad = np.empty((sl.stop - sl.start, det.rows, det.pixels), dtype=np.float32)
+                for r in range(det.rows):
+                    rad[:, r, :] = renderer.render_block(row_detector(det, r), np.asarray(t_frames[sl]))
+                    if bar is not None:
+                        bar.update(sl.stop - sl.start)
+                t1 = _time.perf_counter()
+                t_render += t1 - t
+                dn = apply_radiometry(rad.reshape(-1, det.pixels), inst.radiometry, seed=sc.seed, band_index=0,
+                                      first_line=sl.start * det.rows).reshape(rad.shape)
+                t2 = _time.perf_counter()
+                t_radio += t2 - t1
+                v[sl.start:sl.stop] = dn
+                t_write += _time.perf_counter() - t2
+                renderer.stats.wall_s += t1 - t
+    finally:
+        _finish(bar, timings, t_render, t_radio, t_write)

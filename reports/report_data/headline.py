@@ -181,12 +181,22 @@ def headline(run: RunData) -> dict:
     if not axes_r:
         res["verdict"] = "no axis restored"
         return res
-    worst = {"rms_px": max(out_axes[a]["rms_px"] for a in axes_r),
-             "p997_px": max(out_axes[a]["p997_px"] for a in axes_r)}
+    return judge(res, out_axes, req, axes_r)
+
+
+def judge(res: dict, per_axis: dict, req: dict, axes) -> dict:
+    """Set ``res``'s ``worst`` (over ``axes`` of ``per_axis``), ``passed`` and ``verdict`` against ``req``."""
+    worst = {"rms_px": max(per_axis[a]["rms_px"] for a in axes), "p997_px": max(per_axis[a]["p997_px"] for a in axes)}
     res["worst"] = worst
     if not req:
         res["verdict"] = "no requirement in the scenario"
         return res
+    res["passed"], res["verdict"] = requirement_verdict(worst, req, axes)
+    return res
+
+
+def requirement_verdict(worst: dict, req: dict, axes) -> tuple[bool, str]:
+    """(passed, "PASS: …" / "FAIL: …") of the worst-axis figures against ``max_rms_px`` / ``max_p997_px``."""
     checks = []
     ok = True
     for key, wkey, label in (("max_rms_px", "rms_px", "RMS"), ("max_p997_px", "p997_px", "99.7 %")):
@@ -194,6 +204,4 @@ def headline(run: RunData) -> dict:
             good = bool(worst[wkey] <= req[key])
             ok &= good
             checks.append(f"worst-axis {label} {worst[wkey]:.4f} px {'≤' if good else '>'} {req[key]:g} px")
-    res["passed"] = ok
-    res["verdict"] = ("PASS" if ok else "FAIL") + ": " + "; ".join(checks) + f" (restored axes: {', '.join(axes_r)})"
-    return res
+    return ok, ("PASS" if ok else "FAIL") + ": " + "; ".join(checks) + f" (restored axes: {', '.join(axes)})"

@@ -337,7 +337,7 @@ class PushbroomRenderer:
                 ys.append(float(self.platform.nominal_ground_point(t_ref, b, self.dem.z_min)[1]))
         margin = 100.0
         self._setup_tiles(min(ys) - margin, max(ys) + margin)
-        along = [d.along_m for d in self.instrument.detectors]
+        along = [d.along_m + k * (d.rows - 1) / 2 * d.pitch_m for d in self.instrument.detectors for k in (-1, 1)]
         self._band_spread_m = (max(along) - min(along)) / f * self.platform.altitude_m
 
     def _strip_cache(self, x_min: float, x_max: float):
