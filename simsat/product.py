@@ -234,6 +234,12 @@ class Product:
                            attitude=attitude or clamped_attitude(self.knowledge), t0_s=float(self.ds.attrs["t0_s"]))
 
     def delay_s(self, ahead: str, behind: str) -> float:
+        """Delay τ [s] of the pair ``ahead/behind``: as stored in product.nc (``delay_s``), else computed from
+        the product's geometry (:func:`simsat.sensor_model.flat_ground_delay_s`, the one place τ is computed)."""
+        if "delay_s" in self.ds and "pair" in self.ds.coords:
+            pairs = [str(p) for p in np.atleast_1d(self.ds["pair"].values)]
+            if f"{ahead}/{behind}" in pairs:
+                return float(np.atleast_1d(self.ds["delay_s"].values)[pairs.index(f"{ahead}/{behind}")])
         return self.sensor_model().nominal_delay_s(ahead, behind)
 
 

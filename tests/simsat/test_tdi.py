@@ -14,7 +14,7 @@ from simsat.config import ScenarioError
 from simsat.render.pushbroom import PushbroomRenderer
 from simsat.sensor_model import SensorModel, constant_attitude, tdi_mean_attitude
 
-from support.geometry import SpotTexture, centred_platform, flat_dem, small_instrument
+from support.geometry import SpotTexture, centred_platform, small_instrument
 
 N_LINES = 160
 STAGES = 9
@@ -42,17 +42,29 @@ def _centres():
     return np.array([(x, y) for x in xs for y in ys])
 
 
+def _hill():
+    """Relief under the spots: a 40 m hill and a tilt (the TDI rows see it from slightly different angles)."""
+    from simsat.terrain.dem import Dem
+
+    x = np.arange(-3000.0, 3000.1, 10.0)
+    y = np.arange(-1500.0, 1500.1, 10.0)
+    xx, yy = np.meshgrid(x, y)
+    z = 40.0 * np.exp(-(xx ** 2 + yy ** 2) / (2 * 150.0 ** 2)) + 0.01 * xx
+    return Dem(x0_m=x[0], y0_m=y[0], dx_m=10.0, dy_m=10.0, z=z)
+
+
 def _render(stages, attitude):
     inst = _instrument(stages)
     plat = centred_platform(inst, N_LINES)
-    dem = flat_dem()
+    dem = _hill()
     r = PushbroomRenderer(platform=plat, instrument=inst, dem=dem, texture=SpotTexture(_centres()), attitude=attitude)
     imgs = r.render(np.arange(N_LINES) * inst.line_period_s, block_lines=64)
     return imgs["B0"], SensorModel(platform=plat, instrument=inst, dem=dem, attitude=attitude)
 
 
 def _measured_minus_predicted(img, sm, attitude):
-    g = np.c_[_centres(), np.zeros(len(_centres()))]
+    c = _centres()
+    g = np.c_[c, sm.dem.height(c[:, 0], c[:, 1])]
     lp, cp = sm.inverse_location("B0", g, attitude=attitude)
     out = []
     for l0, c0 in zip(lp, cp):

@@ -233,7 +233,8 @@ def test_product_reads_back_the_trajectory_scan_tdi_and_delays(tmp_path, name, p
     assert [d.tdi_stages for d in p.instrument.detectors] == [d.tdi_stages for d in sc.instrument.detectors]
     assert p.instrument.detectors[0].tdi_stages == (5 if pan else 1)
     for a, b in (("B1", "B0"), ("B0", "B2")):
-        assert p.delay_s(a, b) == pytest.approx(sc.delay_s(a, b), rel=1e-12)
+        assert p.delay_s(a, b) == pytest.approx(sc.delay_s(a, b), rel=1e-12)  # read back from the file
+        assert p.sensor_model().nominal_delay_s(a, b) == pytest.approx(sc.delay_s(a, b), rel=1e-12)  # recomputed
     stored = dict(zip([str(s) for s in p.ds["pair"].values], p.ds["delay_s"].values))
     assert stored["B1/B0"] == pytest.approx(7.4e-3, rel=2e-4)
     # the ground segment's ephemeris is the platform's
