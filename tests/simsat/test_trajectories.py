@@ -44,6 +44,9 @@ def _case(name):
         return Platform(CircularOrbit(LEO_H)), leo_f
     if name == "leo_spin":
         return Platform(CircularOrbit(LEO_H), scan=SpinScan(rate_rad_s=0.05)), leo_f
+    if name == "geo_spin":  # claim 17 with the spin: a geostationary spinner sweeping the scene
+        return Platform(CircularOrbit(GEOSTATIONARY_ALTITUDE_M, inclination_rad=0.0),
+                        scan=SpinScan(rate_rad_s=1e-4)), geo_f
     if name == "geo_mirror":
         return Platform(CircularOrbit(GEOSTATIONARY_ALTITUDE_M, inclination_rad=0.0),
                         scan=MirrorScan(mirror_rate_rad_s=5e-5, scan_frequency_hz=0.5)), geo_f
@@ -104,7 +107,7 @@ def test_sampled_ephemeris_reproduces_the_orbit_it_samples():
     np.testing.assert_allclose(back.position(tq), eph.position(tq), atol=1e-9)
 
 
-@pytest.mark.parametrize("name", ["straight", "leo_orbit", "leo_spin", "geo_mirror"])
+@pytest.mark.parametrize("name", ["straight", "leo_orbit", "leo_spin", "geo_mirror", "geo_spin"])
 def test_platform_attributes_round_trip(name):
     plat, _ = _centred(name)
     a = plat.attrs()
@@ -121,7 +124,7 @@ def _ground_angle(alpha, h, radius=EARTH_RADIUS_M):
     return math.asin((radius + h) * math.sin(alpha) / radius) - alpha
 
 
-@pytest.mark.parametrize("name", ["straight", "leo_orbit", "leo_spin", "geo_mirror"])
+@pytest.mark.parametrize("name", ["straight", "leo_orbit", "leo_spin", "geo_mirror", "geo_spin"])
 def test_delay_matches_the_hand_formula_of_each_geometry(name):
     plat, inst = _centred(name)
     f = inst.focal_length_m
@@ -136,6 +139,8 @@ def test_delay_matches_the_hand_formula_of_each_geometry(name):
     elif name == "leo_spin":  # small angles: the ground point advances at ω R + (H / R) ω_s R
         orb = plat.trajectory
         hand = (LEO_H / EARTH_RADIUS_M) * (aa - ab) / (orb.angular_rate_rad_s + LEO_H / EARTH_RADIUS_M * 0.05)
+    elif name == "geo_spin":  # a fixed point: the spin turns the line of sight by ω t
+        hand = (aa - ab) / 1e-4
     else:  # a fixed point: the mirror turns the line of sight by 2 ω_m t
         hand = (aa - ab) / (2 * 5e-5)
     assert tau == pytest.approx(hand, rel=2e-6 if name == "leo_spin" else 1e-7)
@@ -153,7 +158,7 @@ def _spot_centroid(img, l0, c0, half=7):
     return (w * ll).sum() / w.sum(), (w * cc).sum() / w.sum()
 
 
-@pytest.mark.parametrize("name", ["straight", "leo_orbit", "leo_spin", "geo_mirror"])
+@pytest.mark.parametrize("name", ["straight", "leo_orbit", "leo_spin", "geo_mirror", "geo_spin"])
 def test_renderer_agrees_with_the_sensor_model_over_relief(name):
     from simsat.render.pushbroom import PushbroomRenderer
 
