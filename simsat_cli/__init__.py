@@ -76,7 +76,8 @@ def cmd_scenarios(args) -> int:
         try:
             sc = load_scenario(path, check_models=False)
             d = sc.instrument.detectors
-            size = f"{sc.acquisition.lines} lines x {d[0].pixels} px x {len(d)} bands"
+            size = (f"{sc.acquisition.lines} frames of {d[0].rows} x {d[0].pixels} px" if sc.acquisition.is_frames
+                    else f"{sc.acquisition.lines} lines x {d[0].pixels} px x {len(d)} bands")
             print(f"{name:{width}s}  {size:32s} {sc.description}")
         except Exception as e:  # pragma: no cover - a broken built-in is a bug
             print(f"{name:{width}s}  (invalid: {e})")
@@ -96,7 +97,9 @@ def cmd_validate(args) -> int:
 
     sc = load_scenario(args.scenario, overrides=_parse_set(args.set))  # every table, every stage
     d = sc.instrument.detectors
-    print(f"{sc.source or args.scenario}: OK — {sc.name}: {sc.acquisition.lines} lines x {d[0].pixels} px, "
+    size = (f"{sc.acquisition.lines} frames of {d[0].rows} x {d[0].pixels} px" if sc.acquisition.is_frames
+            else f"{sc.acquisition.lines} lines x {d[0].pixels} px")
+    print(f"{sc.source or args.scenario}: OK — {sc.name}: {size}, "
           f"{len(d)} bands ({', '.join(x.name for x in d)}), scene x ∈ [{sc.x_range_m[0]:.0f}, {sc.x_range_m[1]:.0f}] m")
     return 0
 

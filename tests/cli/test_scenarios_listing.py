@@ -9,5 +9,5 @@ def test_every_builtin_is_listed_in_aligned_columns(capsys):
     names = list(builtin_scenarios())
     rows = [ln for ln in out if ln.split(" ", 1)[0] in names]
     assert [r.split(" ", 1)[0] for r in rows] == names
-    starts = {r.index(" lines x ") - len(r[:r.index(" lines x ")].split()[-1]) for r in rows}
+    starts = {r.index(r.split()[1], len(r.split()[0])) for r in rows}
     assert len(starts) == 1  # the size column starts at the same place on every row
