@@ -89,6 +89,13 @@ def frames_summary(run_dir, *, report_path=None) -> str:
     return "\n".join(lines)
 
 
+def _predicted_px(rest, axis: str) -> float:
+    """RMS of the predicted 1-σ of ``axis`` [px] (NaN when the restoration has none)."""
+    if f"sigma_{axis}" not in rest:
+        return float("nan")
+    return float(np.sqrt(np.nanmean(rest[f"sigma_{axis}"].values ** 2)) / float(rest.attrs["pixel_ifov_rad"]))
+
+
 def _attitude_figure(rest, truth, axis: str, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -161,15 +168,18 @@ def make_frames_report(run_dir, *, out_dir=None) -> Path:
     rows = []
     if rest is not None and truth is not None:
         parts.append("<table border=1 cellpadding=4><tr><th>axis</th><th>restored RMS [px]</th><th>restored 99.7 % "
-                     "[px]</th><th>AOCS RMS [px]</th><th>AOCS 99.7 % [px]</th><th>improvement</th></tr>")
+                     "[px]</th><th>AOCS RMS [px]</th><th>AOCS 99.7 % [px]</th><th>improvement</th>"
+                     "<th>predicted 1σ RMS [px]</th></tr>")
         for a in hd["axes"]:
             e = hd["errors"][a]
             imp = e["knowledge_rms_px"] / e["rms_px"] if e["rms_px"] > 0 else float("inf")
             parts.append(f"<tr><td>{a}</td><td>{e['rms_px']:.4f}</td><td>{e['p997_px']:.4f}</td>"
-                         f"<td>{e['knowledge_rms_px']:.4f}</td><td>{e['knowledge_p997_px']:.4f}</td><td>{imp:.1f}</td></tr>")
+                         f"<td>{e['knowledge_rms_px']:.4f}</td><td>{e['knowledge_p997_px']:.4f}</td><td>{imp:.1f}</td>"
+                         f"<td>{_predicted_px(rest, a):.4f}</td></tr>")
             rows.append({"axis": a, **{k: e[k] for k in ("rms_px", "p997_px", "knowledge_rms_px", "knowledge_p997_px")}})
             _attitude_figure(rest, truth, a, out / f"attitude_{a}.png")
-        parts.append("</table>")
+        parts.append("</table><p>Predicted 1σ: the least squares' covariance with independent matching errors; "
+                     "the windows of neighbouring points overlap, so it is optimistic.</p>")
         for a in hd["axes"]:
             parts.append(f'<h2>{a}</h2><img src="attitude_{a}.png" alt="{a} at the frame times">')
     if rest is not None:

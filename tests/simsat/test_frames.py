@@ -129,9 +129,15 @@ def test_least_squares_recovers_a_known_attitude_from_frame_differences():
         res += rng.normal(0, 0.02, res.shape)
         res[:5] += 3.0  # outliers
         pairs.append((res, j1, j0, np.ones(npts, bool)))
-    x, res_rms, kept = solve_frame_attitudes(pairs, n, [0, 1])
+    x, res_rms, kept, sigma = solve_frame_attitudes(pairs, n, [0, 1])
     # noise 0.02 px per point, 115 points per difference: the differences to ~0.002 px, the walk to ~0.006 px
-    assert np.sqrt(np.mean((x - truth) ** 2)) * 2.5e5 < 0.01
+    actual = np.sqrt(np.mean((x - truth) ** 2))
+    assert actual * 2.5e5 < 0.01
+    # the predicted 1-σ says so: the actual RMS within a factor 1.5 of the predicted RMS
+    predicted = np.sqrt(np.mean(sigma ** 2))
+    assert predicted / 1.5 < actual < predicted * 1.5
+    # a random walk: the ends of the record are less certain than its middle
+    assert sigma[0, 0] > 1.5 * sigma[n // 2, 0]
     assert np.all(kept <= npts - 5)
     assert np.nanmax(res_rms) < 0.03
 
@@ -156,6 +162,8 @@ def test_matrix_frames_render_restore_and_beat_the_knowledge(tmp_path):
     for a in ("roll", "pitch"):
         e = hd["errors"][a]
         assert e["rms_px"] < 0.06 and e["knowledge_rms_px"] > 5 * e["rms_px"]
+        predicted = float(np.sqrt(np.mean(rest[f"sigma_{a}"].values ** 2))) / float(rest.attrs["pixel_ifov_rad"])
+        assert 0 < predicted < 0.06
     assert "requirement" in frames_summary(tmp_path / "r")
     index = make_frames_report(tmp_path / "r")
     assert index.is_file() and (index.parent / "attitude_roll.png").is_file()
