@@ -79,14 +79,19 @@ class FrameRestoration:
         ok = self.n_points > 0
         frac = float(self.n_valid[ok].sum() / max(self.n_points[ok].sum(), 1))
         corr = ", ".join(f"{a} {np.nanstd(self.correction[a]) / self.pixel_ifov_rad:.3f} px rms" for a in self.axes)
+        cov = ", ".join(f"{a} {100 * v:.1f} %" for a, v in self.coverage.items())
+        segs = frame_segments(pair_ties(self.n_valid, self.residual_px), self.time.size)
+        broken = (f"; {len(segs)} runs of frames tied together (between them too few matches: each run keeps the "
+                  f"knowledge's mean)" if len(segs) > 1 else "")
         return "\n".join([
             f"restoration from {self.time.size} frames ({self.time.size - 1} overlapping pairs, frame period "
-            f"{1e3 * float(np.median(np.diff(self.time))):.2f} ms)",
+            f"{1e3 * float(np.median(np.diff(self.time))):.2f} ms){broken}",
             f"  matches: {int(self.n_valid.sum())} / {int(self.n_points.sum())} valid ({100 * frac:.1f} %), fit "
             f"residual {float(np.sqrt(np.nanmean(self.residual_px ** 2))):.3f} px RMS",
             "  predicted error (1σ RMS, matching errors taken as independent: optimistic where windows overlap): "
             + ", ".join(
-                f"{a} {float(np.sqrt(np.mean(self.sigma[a] ** 2))) / self.pixel_ifov_rad:.3f} px" for a in self.axes),
+                f"{a} {float(np.sqrt(np.nanmean(self.sigma[a] ** 2))) / self.pixel_ifov_rad:.3f} px" for a in self.axes),
+            f"  coverage (frames tied to a neighbour): {cov}",
             f"  correction applied: {corr}" + (f"; below {self.highpass_hz:g} Hz the knowledge is kept"
                                               if self.highpass_hz > 0 else ""),
             f"  time: {self.timings.get('total_s', float('nan')):.1f} s"])
@@ -125,8 +130,40 @@ def frame_pair_matches(product, k: int, frames_k: np.ndarray, frames_k1: np.ndar
     return res, j1, j0, valid
 
 
+#: fewest kept matches that tie two successive frames, and the largest standard error of their mean shift [px]:
+#: a pair bridging clouds with a handful of poor matches on their edges does not tie its frames
+MIN_POINTS_PER_PAIR = 8
+MAX_PAIR_SHIFT_STD_PX = 0.03
+
+
+def pair_ties(kept_per_pair, residual_px=None) -> np.ndarray:
+    """Whether each pair's kept matches tie its two frames: at least :data:`MIN_POINTS_PER_PAIR` of them and,
+    when the pairs' fit residuals [px] are known, a standard error ``residual / √kept`` within
+    :data:`MAX_PAIR_SHIFT_STD_PX`."""
+    kept = np.asarray(kept_per_pair, dtype=float)
+    tied = kept >= MIN_POINTS_PER_PAIR
+    if residual_px is not None:
+        r = np.asarray(residual_px, dtype=float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            tied &= ~(r / np.sqrt(np.maximum(kept, 1)) > MAX_PAIR_SHIFT_STD_PX)  # NaN residual: no evidence against
+    return tied
+
+
+def frame_segments(ties, n_frames: int) -> list:
+    """Runs of frames tied by successive pairs (``ties[k]``: frames k and k + 1 tied) → list of index arrays."""
+    out, start = [], 0
+    for k, tied in enumerate(ties):
+        if not tied:
+            out.append(np.arange(start, k + 1))
+            start = k + 1
+    out.append(np.arange(start, n_frames))
+    return out
+
+
 def solve_frame_attitudes(pairs: list, n_frames: int, axes_idx: list, *, n_sigma: float = 3.0):
-    """Least-squares attitudes δθ (n_frames, len(axes_idx)) [rad] from the pairs' equations, zero mean per axis.
+    """Least-squares attitudes δθ (n_frames, len(axes_idx)) [rad] from the pairs' equations, zero mean per axis
+    over each run of frames the matches tie together (:func:`frame_segments`; a frame with no valid match
+    to either neighbour keeps the knowledge).
 
     ``pairs[k] = (residual, J1, J0, valid)`` of frames (k, k + 1). Returns the
     solution, the per-pair residual RMS [px], the per-pair count of the
@@ -140,13 +177,16 @@ def solve_frame_attitudes(pairs: list, n_frames: int, axes_idx: list, *, n_sigma
     na = len(axes_idx)
     keep = [p[3].copy() for p in pairs]
     x = np.zeros((n_frames, na))
-    for _ in range(3):  # solve, reject outliers at n_sigma of the robust residual, solve again
+    res_rms = None
+    for _ in range(4):  # solve, reject outliers at n_sigma of the robust residual, re-judge the ties, solve again
         rows_i, cols_i, vals, rhs = [], [], [], []
         eq = 0
+        ties = pair_ties([int(k.sum()) for k in keep], res_rms)
+        segments = frame_segments(ties, n_frames)
         for k, (res, j1, j0, _) in enumerate(pairs):
             ok = keep[k]
             n = int(ok.sum())
-            if n == 0:
+            if not ties[k]:  # too few to tie frames k and k + 1: a break between segments
                 continue
             for c in range(2):
                 e = eq + np.arange(n)
@@ -159,14 +199,16 @@ def solve_frame_attitudes(pairs: list, n_frames: int, axes_idx: list, *, n_sigma
         if eq == 0:
             raise RestorationError("no valid match between successive frames: nothing to restore")
         n_measured = eq
-        # gauge: zero mean per axis (weighted like many equations)
+        # gauge: zero mean per axis over each segment of tied frames (weighted like many equations): the offset
+        # between segments is unobservable from images, each keeps the knowledge's mean
         scale = float(np.sqrt(np.mean(np.concatenate(vals) ** 2))) * 10.0
-        for a in range(na):
-            rows_i.append(np.full(n_frames, eq))
-            cols_i.append(np.arange(n_frames) * na + a)
-            vals.append(np.full(n_frames, scale / n_frames))
-            rhs.append(np.zeros(1))
-            eq += 1
+        for seg in segments:
+            for a in range(na):
+                rows_i.append(np.full(seg.size, eq))
+                cols_i.append(seg * na + a)
+                vals.append(np.full(seg.size, scale / seg.size))
+                rhs.append(np.zeros(1))
+                eq += 1
         A = coo_matrix((np.concatenate(vals), (np.concatenate(rows_i), np.concatenate(cols_i))),
                        shape=(eq, n_frames * na)).tocsr()
         b = np.concatenate(rhs)
@@ -174,21 +216,26 @@ def solve_frame_attitudes(pairs: list, n_frames: int, axes_idx: list, *, n_sigma
         changed = False
         res_rms = np.full(len(pairs), np.nan)
         for k, (res, j1, j0, valid) in enumerate(pairs):
-            pred = np.einsum("nca,a->nc", j1[:, :, axes_idx], x[k + 1]) - np.einsum("nca,a->nc", j0[:, :, axes_idx], x[k])
-            r = np.linalg.norm(res - pred, axis=1)
             if not valid.any():
                 continue
+            pred = np.einsum("nca,a->nc", j1[:, :, axes_idx], x[k + 1]) - np.einsum("nca,a->nc", j0[:, :, axes_idx], x[k])
+            d = res - pred
+            if not ties[k]:  # frames in different runs: their offset is arbitrary, judge the scatter about it
+                d = d - np.median(d[valid], axis=0)
+            r = np.linalg.norm(d, axis=1)
             med = np.median(r[valid])
             sig = 1.4826 * np.median(np.abs(r[valid] - med)) + 1e-6
             new = valid & (r <= med + n_sigma * sig)
             changed |= bool((new != keep[k]).any())
             keep[k] = new
-            res_rms[k] = float(np.sqrt(np.mean((res - pred)[new] ** 2))) if new.any() else np.nan
+            res_rms[k] = float(np.sqrt(np.mean(d[new] ** 2))) if new.any() else np.nan
+        changed |= bool((pair_ties([int(k.sum()) for k in keep], res_rms) != ties).any())
         if not changed:
             break
     # predicted 1-σ of each frame's attitude: (AᵀA)⁻¹ scaled by the residual variance of the kept equations
-    n_eq = int(sum(int(k.sum()) for k in keep)) * 2
-    r2 = np.nansum([(rr ** 2) * int(k.sum()) * 2 for rr, k in zip(res_rms, keep)])
+    used = [int(k.sum()) if tied else 0 for k, tied in zip(keep, ties)]
+    n_eq = 2 * sum(used)
+    r2 = np.nansum([(rr ** 2) * 2 * n for rr, n in zip(res_rms, used) if n])
     s2 = r2 / max(n_eq - n_frames * na, 1)
     a_meas = A[:n_measured]  # the measurements only: their pseudo-inverse is the covariance in the zero-mean gauge
     normal = (a_meas.T @ a_meas).toarray()
@@ -245,11 +292,15 @@ def restore_frames(product, settings, *, progress: bool = False) -> FrameRestora
     x = _highpass(x, fs, hp)
     x = x - x.mean(axis=0)
     knowledge = dict(zip(AXES, product.knowledge.at(product.time)))
+    # a frame tied to neither neighbour (clouds, water, no texture) is not restored: NaN, not the knowledge
+    alone = np.zeros(n, bool)
+    for seg in frame_segments(pair_ties(kept, res_rms), n):
+        alone[seg] = seg.size < 2
     correction = {a: np.zeros(n) for a in AXES}
     sigma = {}
     for i, a in enumerate(axes):
-        correction[a] = x[:, i]
-        sigma[a] = sig[:, i]
+        correction[a] = np.where(alone, np.nan, x[:, i])
+        sigma[a] = np.where(alone, np.nan, sig[:, i])
     restored = {a: knowledge[a] + correction[a] for a in AXES}
     n_points = np.array([p[3].size for p in pairs])
     return FrameRestoration(time=product.time, restored=restored, knowledge=knowledge, correction=correction,

@@ -186,3 +186,27 @@ def test_frames_need_one_matrix_detector():
 
     with pytest.raises(ScenarioError, match="acquisition.frame_period_ms.*one matrix detector"):
         load_scenario("phr_cmg", overrides={"acquisition": {"frame_period_ms": 10.0}})
+
+
+def test_a_pair_without_matches_splits_the_record_and_each_run_keeps_its_own_mean():
+    from restore.frames import frame_segments, pair_ties, solve_frame_attitudes
+
+    rng = np.random.default_rng(4)
+    n, npts, cut = 30, 80, 14
+    truth = rng.normal(0, 1e-6, (n, 2))
+    pairs = []
+    for k in range(n - 1):
+        j = np.zeros((npts, 2, 3))
+        j[:, 0, 1] = 2.5e5
+        j[:, 1, 0] = -2.5e5
+        res = np.einsum("nca,a->nc", j[:, :, :2], truth[k + 1] - truth[k]) + rng.normal(0, 0.01, (npts, 2))
+        valid = np.ones(npts, bool) if k != cut else np.zeros(npts, bool)  # clouds over frames 14-15
+        pairs.append((res, j, j.copy(), valid))
+    segs = frame_segments(pair_ties([int(p[3].sum()) for p in pairs]), n)
+    assert [list(s[[0, -1]]) for s in segs] == [[0, cut], [cut + 1, n - 1]]
+    x, _, kept, sigma = solve_frame_attitudes(pairs, n, [0, 1])
+    for seg in segs:  # each run: the truth up to its own mean (the offset between runs is unobservable)
+        want = truth[seg] - truth[seg].mean(axis=0)
+        np.testing.assert_allclose(x[seg], want, atol=0.01 / 2.5e5)
+        np.testing.assert_allclose(x[seg].mean(axis=0), 0.0, atol=1e-12)
+    assert kept[cut] == 0 and np.all(np.isfinite(sigma))
