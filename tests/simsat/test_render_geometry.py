@@ -10,18 +10,9 @@ import pytest
 from simsat.render.pushbroom import PushbroomRenderer
 from simsat.sensor_model import SensorModel, constant_attitude
 
-from support.geometry import SpotTexture, WaveTexture, centred_platform, flat_dem, small_instrument
+from support.geometry import SpotTexture, WaveTexture, centred_platform, flat_dem, small_instrument, spot_centroid, spot_errors
 
 N_LINES = 160
-
-
-def _spot_centroid(img, l0, c0, half=7):
-    li, ci = int(round(l0)), int(round(c0))
-    win = img[li - half:li + half + 1, ci - half:ci + half + 1].astype(np.float64)
-    win = win - np.median(np.r_[win[0], win[-1], win[:, 0], win[:, -1]])
-    ll, cc = np.mgrid[li - half:li + half + 1, ci - half:ci + half + 1]
-    w = np.clip(win, 0, None)
-    return (w * ll).sum() / w.sum(), (w * cc).sum() / w.sum()
 
 
 def _render(texture, attitude, *, dem=None, inst=None):
@@ -49,14 +40,7 @@ def spot_render():
 def test_features_appear_where_inverse_location_says(spot_render):
     centres, imgs, sm = spot_render
     g = np.c_[centres, np.zeros(len(centres))]
-    errs = []
-    for band in ("B1", "B0"):
-        lp, cp = sm.inverse_location(band, g)
-        for l0, c0 in zip(lp, cp):
-            if 10 < l0 < N_LINES - 10 and 10 < c0 < 86:
-                lm, cm = _spot_centroid(imgs[band], l0, c0)
-                errs.append((lm - l0, cm - c0))
-    errs = np.array(errs)
+    errs = spot_errors(sm, imgs, ("B1", "B0"), g, N_LINES)
     assert len(errs) >= 20
     assert np.max(np.abs(errs)) <= 0.01, errs
 
@@ -71,8 +55,8 @@ def test_second_band_sees_a_point_tau_later(spot_render):
     for (la, ca) in zip(l1, c1):
         lb = la + tau_lines
         if 10 < la and lb < N_LINES - 10 and 10 < ca < 86:
-            m1 = _spot_centroid(imgs["B1"], la, ca)
-            m0 = _spot_centroid(imgs["B0"], lb, ca)
+            m1 = spot_centroid(imgs["B1"], la, ca)
+            m0 = spot_centroid(imgs["B0"], lb, ca)
             d.append(m0[0] - m1[0])
     assert len(d) >= 5
     assert np.max(np.abs(np.array(d) - tau_lines)) <= 0.01
@@ -95,8 +79,8 @@ def test_constant_attitude_offset_moves_the_image_by_the_predicted_amount(spot_r
     errs = []
     for a0, b0, a1, b1 in zip(l0, c0, l1, c1):
         if 10 < min(a0, a1) and max(a0, a1) < N_LINES - 10 and 10 < min(b0, b1) and max(b0, b1) < 86:
-            m0 = _spot_centroid(imgs0["B0"], a0, b0)
-            m1 = _spot_centroid(imgs1["B0"], a1, b1)
+            m0 = spot_centroid(imgs0["B0"], a0, b0)
+            m1 = spot_centroid(imgs1["B0"], a1, b1)
             errs.append(((m1[0] - m0[0]) - (a1 - a0), (m1[1] - m0[1]) - (b1 - b0)))
     errs = np.array(errs)
     assert len(errs) >= 8

@@ -14,7 +14,7 @@ from simsat.config import ScenarioError
 from simsat.render.pushbroom import PushbroomRenderer
 from simsat.sensor_model import SensorModel, constant_attitude, tdi_mean_attitude
 
-from support.geometry import SpotTexture, centred_platform, small_instrument
+from support.geometry import SpotTexture, centred_platform, small_instrument, spot_centroid
 
 N_LINES = 160
 STAGES = 9
@@ -24,15 +24,6 @@ def _instrument(stages):
     inst = small_instrument()
     b0 = replace(inst.detector("B0"), tdi_stages=stages)
     return replace(inst, detectors=(inst.detector("B1"), b0))
-
-
-def _spot_centroid(img, l0, c0, half=7):
-    li, ci = int(round(l0)), int(round(c0))
-    win = img[li - half:li + half + 1, ci - half:ci + half + 1].astype(np.float64)
-    win = win - np.median(np.r_[win[0], win[-1], win[:, 0], win[:, -1]])
-    ll, cc = np.mgrid[li - half:li + half + 1, ci - half:ci + half + 1]
-    w = np.clip(win, 0, None)
-    return (w * ll).sum() / w.sum(), (w * cc).sum() / w.sum()
 
 
 def _centres():
@@ -69,7 +60,7 @@ def _measured_minus_predicted(img, sm, attitude):
     out = []
     for l0, c0 in zip(lp, cp):
         if 10 < l0 < N_LINES - 10 and 10 < c0 < 86:
-            lm, cm = _spot_centroid(img, l0, c0)
+            lm, cm = spot_centroid(img, l0, c0)
             out.append((lm - l0, cm - c0))
     assert len(out) >= 8
     return np.array(out)

@@ -20,7 +20,7 @@ from simsat.terrain.dem import Dem
 from simsat.trajectory import (EARTH_MU_M3_S2, EARTH_RADIUS_M, EARTH_ROTATION_RAD_S, GEOSTATIONARY_ALTITUDE_M,
                                CircularOrbit, SampledEphemeris, StraightTrack, trajectory_from_attrs)
 
-from support.geometry import SpotTexture
+from support.geometry import SpotTexture, spot_errors
 
 LEO_H = 694000.0
 PITCH = 13e-6
@@ -149,15 +149,6 @@ def test_delay_matches_the_hand_formula_of_each_geometry(name):
 
 
 # --------------------------------------------------------------------------- renderer against sensor model
-def _spot_centroid(img, l0, c0, half=7):
-    li, ci = int(round(l0)), int(round(c0))
-    win = img[li - half:li + half + 1, ci - half:ci + half + 1].astype(np.float64)
-    win = win - np.median(np.r_[win[0], win[-1], win[:, 0], win[:, -1]])
-    ll, cc = np.mgrid[li - half:li + half + 1, ci - half:ci + half + 1]
-    w = np.clip(win, 0, None)
-    return (w * ll).sum() / w.sum(), (w * cc).sum() / w.sum()
-
-
 @pytest.mark.parametrize("name", ["straight", "leo_orbit", "leo_spin", "geo_mirror", "geo_spin"])
 def test_renderer_agrees_with_the_sensor_model_over_relief(name):
     from simsat.render.pushbroom import PushbroomRenderer
@@ -176,14 +167,7 @@ def test_renderer_agrees_with_the_sensor_model_over_relief(name):
     imgs = r.render(t, block_lines=64)
     sm = SensorModel(platform=plat, instrument=inst, dem=dem, attitude=att)
     g = np.c_[centres, dem.height(centres[:, 0], centres[:, 1])]
-    errs = []
-    for band in ("B1", "B0"):
-        lp, cp = sm.inverse_location(band, g)
-        for l0, c0 in zip(lp, cp):
-            if 10 < l0 < N_LINES - 10 and 10 < c0 < 86:
-                lm, cm = _spot_centroid(imgs[band], l0, c0)
-                errs.append((lm - l0, cm - c0))
-    errs = np.array(errs)
+    errs = spot_errors(sm, imgs, ("B1", "B0"), g, N_LINES)
     assert len(errs) >= 20
     assert np.max(np.abs(errs)) <= 0.01, errs
 

@@ -76,3 +76,26 @@ def centred_platform(instrument, n_lines):
     along = np.mean([d.along_m for d in instrument.detectors])
     return Platform.straight(altitude_m=H, ground_speed_m_s=V).centred(t_mid_s=0.5 * (n_lines - 1) * TE,
                                                               along_angle_rad=np.arctan(along / F))
+
+
+def spot_centroid(img, l0, c0, half=7):
+    """Centroid (line, column) of a bright spot near (l0, c0): background (window border median) removed."""
+    li, ci = int(round(l0)), int(round(c0))
+    win = img[li - half:li + half + 1, ci - half:ci + half + 1].astype(np.float64)
+    win = win - np.median(np.r_[win[0], win[-1], win[:, 0], win[:, -1]])
+    ll, cc = np.mgrid[li - half:li + half + 1, ci - half:ci + half + 1]
+    w = np.clip(win, 0, None)
+    return (w * ll).sum() / w.sum(), (w * cc).sum() / w.sum()
+
+
+def spot_errors(sm, images, bands, ground, n_lines, *, margin=10):
+    """Measured minus inverse-located (line, column) of every spot inside the images of ``bands``, (N, 2)."""
+    errs = []
+    for band in bands:
+        lp, cp = sm.inverse_location(band, ground)
+        width = images[band].shape[1]
+        for l0, c0 in zip(lp, cp):
+            if margin < l0 < n_lines - margin and margin < c0 < width - margin:
+                lm, cm = spot_centroid(images[band], l0, c0)
+                errs.append((lm - l0, cm - c0))
+    return np.array(errs)
