@@ -110,7 +110,7 @@ class Platform:
         r = np.broadcast_to(r, t.shape + (3, 3)) if r.shape[:-2] != t.shape else r
         if self.scan.los_rate_rad_s != 0.0:
             r = r @ self.scan.rotation(t)
-        if self.trajectory.kind != "straight":
+        if not self.trajectory.flat_frame:
             r = self.trajectory.frame(t) @ r
         return r
 
@@ -165,15 +165,18 @@ _TRAJECTORY_BUILDERS = {"straight": _straight_from_config, "orbit": _orbit_from_
 assert tuple(_TRAJECTORY_BUILDERS) == TRAJECTORY_KINDS
 
 
+#: ``[platform.scan] kind`` → builder from the table
+_SCAN_BUILDERS = {
+    "none": lambda sec: ScanLaw(),
+    "spin": lambda sec: SpinScan(rate_rad_s=spin_rate_rad_s(sec.number("rate_rpm", gt=0, le=600))),
+    "mirror": lambda sec: MirrorScan(mirror_rate_rad_s=math.radians(sec.number("mirror_rate_deg_s", gt=0, le=1000)),
+                                     scan_frequency_hz=sec.number("scan_frequency_hz", gt=0, le=1000)),
+}
+assert tuple(_SCAN_BUILDERS) == SCAN_KINDS
+
+
 def _scan_from_config(sec: Section) -> ScanLaw:
-    kind = sec.string("kind", "none", choices=SCAN_KINDS)
-    if kind == "spin":
-        law = SpinScan(rate_rad_s=spin_rate_rad_s(sec.number("rate_rpm", gt=0, le=600)))
-    elif kind == "mirror":
-        law = MirrorScan(mirror_rate_rad_s=math.radians(sec.number("mirror_rate_deg_s", gt=0, le=1000)),
-                         scan_frequency_hz=sec.number("scan_frequency_hz", gt=0, le=1000))
-    else:
-        law = ScanLaw()
+    law = _SCAN_BUILDERS[sec.string("kind", "none", choices=SCAN_KINDS)](sec)
     sec.finish()
     return law
 

@@ -66,6 +66,8 @@ class Trajectory:
     """Interface of a trajectory (see the module docstring)."""
 
     kind = ""
+    #: True when the orbital frame is the local frame at every time (a flat Earth): pointing skips it
+    flat_frame = False
 
     @property
     def ground_speed_m_s(self) -> float:  # pragma: no cover - interface
@@ -111,6 +113,7 @@ class StraightTrack(Trajectory):
     y_m: float = 0.0
     kind = "straight"
     earth_radius_m = math.inf
+    flat_frame = True
 
     @property
     def ground_speed_m_s(self) -> float:
@@ -244,6 +247,7 @@ class SampledEphemeris(Trajectory):
         self.time_s, self.position_m = t, p
         self._spline = CubicSpline(t, p, axis=0, extrapolate=True)
         self.earth_radius_m = float(earth_radius_m)
+        self.flat_frame = not math.isfinite(self.earth_radius_m)
         mid = self.position(t[len(t) // 2])
         self.altitude_m = float(np.hypot(np.hypot(mid[0], mid[1]), mid[2] + self.earth_radius_m)
                                 - self.earth_radius_m) if math.isfinite(self.earth_radius_m) else float(mid[2])
