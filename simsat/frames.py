@@ -90,9 +90,15 @@ def rows_per_frame(platform, det: Detector, focal_length_m: float, frame_period_
     return platform.ground_speed_m_s * frame_period_s / gsd
 
 
-def render_frames(renderer, det: Detector, frame_times: np.ndarray) -> np.ndarray:
-    """Radiance (frames, rows, columns) float32 of a matrix detector: every row at every frame time."""
-    out = np.empty((len(frame_times), det.rows, det.pixels), dtype=np.float32)
+def render_frames(renderer, det: Detector, frame_times: np.ndarray, *, progress=None) -> np.ndarray:
+    """Radiance (frames, rows, columns) float32 of a matrix detector: every row at every frame time.
+
+    ``progress(n)`` is called after each row with the number of frames it rendered.
+    """
+    t = np.asarray(frame_times, dtype=np.float64)
+    out = np.empty((len(t), det.rows, det.pixels), dtype=np.float32)
     for r in range(det.rows):
-        out[:, r, :] = renderer.render_block(row_detector(det, r), np.asarray(frame_times, dtype=np.float64))
+        out[:, r, :] = renderer.render_block(row_detector(det, r), t)
+        if progress is not None:
+            progress(len(t))
     return out

@@ -273,7 +273,7 @@ def _render_frames_into(sc: Scenario, renderer, path: Path, t_frames, timings: d
     """
     import netCDF4
 
-    from .frames import row_detector
+    from .frames import render_frames
 
     inst = sc.instrument
     det = inst.detectors[0]
@@ -296,11 +296,7 @@ def _render_frames_into(sc: Scenario, renderer, path: Path, t_frames, timings: d
             for a in range(0, n, block):
                 sl = slice(a, min(n, a + block))
                 t = _time.perf_counter()
-                rad = np.empty((sl.stop - sl.start, det.rows, det.pixels), dtype=np.float32)
-                for r in range(det.rows):
-                    rad[:, r, :] = renderer.render_block(row_detector(det, r), np.asarray(t_frames[sl]))
-                    if bar is not None:
-                        bar.update(sl.stop - sl.start)
+                rad = render_frames(renderer, det, t_frames[sl], progress=bar.update if bar is not None else None)
                 t1 = _time.perf_counter()
                 t_render += t1 - t
                 dn = apply_radiometry(rad.reshape(-1, det.pixels), inst.radiometry, seed=sc.seed, band_index=0,
