@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import fractional_sample, prepare
+from ._common import check_positive, fractional_sample, prepare
 
 __all__ = ["observed_mask", "estimable_mask", "coverage", "fill_from_differentials",
-           "interpolate_gaps", "nan_runs"]
+           "interpolate_gaps", "nan_runs", "finish_estimate"]
 
 
 def nan_runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -198,3 +198,14 @@ def _fill_ar(th: np.ndarray, gaps: list, order: int, fin: np.ndarray) -> np.ndar
 
 #: ``interpolate_gaps(method=...)`` → filler
 _GAP_FILLERS = {"ar": _fill_ar, "linear": _fill_linear}
+
+
+def finish_estimate(theta: np.ndarray, valid: np.ndarray, taus: np.ndarray, dt: float, max_gap_s) -> np.ndarray:
+    """``theta`` NaN where the pairs do not observe it (gaps longer than ``max_gap_s``, default the longest
+    lag: :func:`restore.integration.gaps.estimable_mask`), mean removed."""
+    max_gap = int(round((taus.max() if max_gap_s is None else
+                         check_positive("max_gap_s", max_gap_s, allow_zero=True)) / dt))
+    theta = np.where(estimable_mask(valid, taus, dt, max_gap=max_gap), theta, np.nan)
+    if np.isfinite(theta).any():
+        theta -= np.nanmean(theta)
+    return theta

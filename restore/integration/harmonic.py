@@ -20,7 +20,7 @@ import numpy as np
 from scipy.interpolate import BSpline
 
 from ._common import check_positive, prepare
-from .gaps import estimable_mask
+from .gaps import finish_estimate
 from .methods import integration_method
 from .spectrum import find_lines
 from .wiener import spectrum_for_lines
@@ -170,9 +170,4 @@ def integrate_harmonic(diffs, taus, dt, *, frequencies_hz=None, knot_spacing_s: 
         extra = integration_method(residual).function(np.where(valid, D - pred, np.nan), taus, dt,
                                                       noise_std=spec.noise_std, max_gap_s=max_gap_s)
         theta = theta + np.nan_to_num(extra - np.nanmean(extra))
-    max_gap = int(round((taus.max() if max_gap_s is None else
-                         check_positive("max_gap_s", max_gap_s, allow_zero=True)) / dt))
-    theta = np.where(estimable_mask(valid, taus, dt, max_gap=max_gap), theta, np.nan)
-    if np.isfinite(theta).any():
-        theta -= np.nanmean(theta)
-    return theta
+    return finish_estimate(theta, valid, taus, dt, max_gap_s)

@@ -31,8 +31,8 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve, solve_discrete_lyapunov
 from scipy.sparse import csr_matrix
 
-from ._common import check_positive, lagrange4, prepare
-from .gaps import estimable_mask
+from ._common import lagrange4, prepare
+from .gaps import finish_estimate
 from .spectrum import find_lines
 from .wiener import spectrum_for_lines
 
@@ -327,9 +327,4 @@ def integrate_kalman(diffs, taus, dt, *, frequencies_hz=None, noise_std=None,
     ks = KalmanSmoother(F, H, Q, spec.noise_std**2, np.zeros(ns), P0)
     xs, _ = ks.smooth(z, checkpoint=checkpoint, variances=False)
     theta = xs[:n, 2 * k]
-    max_gap = int(round((taus.max() if max_gap_s is None else
-                         check_positive("max_gap_s", max_gap_s, allow_zero=True)) / dt))
-    theta = np.where(estimable_mask(valid, taus, dt, max_gap=max_gap), theta, np.nan)
-    if np.isfinite(theta).any():
-        theta -= np.nanmean(theta)
-    return theta
+    return finish_estimate(theta, valid, taus, dt, max_gap_s)

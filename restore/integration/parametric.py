@@ -36,7 +36,8 @@ from __future__ import annotations
 import numpy as np
 
 from ._common import check_positive, prepare
-from .polynomial import _check_degree, finish_estimate, pair_noise, polynomial_design
+from .gaps import finish_estimate
+from .polynomial import _check_degree, pair_noise, polynomial_design
 
 __all__ = ["integrate_parametric", "ParametricModel", "damped_chirp_basis", "initial_components"]
 

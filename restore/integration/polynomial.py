@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 
 from ._common import check_positive, per_pair, prepare
-from .gaps import estimable_mask
+from .gaps import finish_estimate
 from .spectrum import estimate_differential_noise
 
-__all__ = ["integrate_polynomial", "polynomial_gain", "polynomial_design", "pair_noise", "finish_estimate"]
+__all__ = ["integrate_polynomial", "polynomial_gain", "polynomial_design", "pair_noise"]
 
 
 def _check_degree(degree) -> int:
@@ -34,17 +34,6 @@ def pair_noise(D: np.ndarray, taus: np.ndarray, dt: float, noise_std) -> np.ndar
     if sig is None:
         sig = estimate_differential_noise(D, taus, dt) if n >= 64 else np.ones(p)
     return np.maximum(sig, 1e-12 * max(np.nanstd(D), 1e-300))
-
-
-def finish_estimate(theta: np.ndarray, valid: np.ndarray, taus: np.ndarray, dt: float, max_gap_s) -> np.ndarray:
-    """``theta`` NaN where the pairs do not observe it (gaps longer than ``max_gap_s``, default the longest
-    lag: :func:`restore.integration.gaps.estimable_mask`), mean removed."""
-    max_gap = int(round((taus.max() if max_gap_s is None else
-                         check_positive("max_gap_s", max_gap_s, allow_zero=True)) / dt))
-    theta = np.where(estimable_mask(valid, taus, dt, max_gap=max_gap), theta, np.nan)
-    if np.isfinite(theta).any():
-        theta -= np.nanmean(theta)
-    return theta
 
 
 def polynomial_design(t, tau: float, degree: int, *, t_c: float = 0.0, h: float = 1.0) -> np.ndarray:
