@@ -108,6 +108,8 @@ def figures_of(what: str, result: dict) -> dict:
         for k in ("rays_per_s", "ratio_to_ceiling", "render_wall_s"):
             if k in m:
                 out[f"render.{k}"] = float(m[k])
+            if k in m.get("baked", {}):
+                out[f"render.baked_{k}"] = float(m["baked"][k])
     return out
 
 

@@ -109,8 +109,10 @@ def rendered_point(base: str, overrides: dict, *, run_dir: Path, keep: bool = Fa
     from restore.pipeline import restore_run
     from restore.restoration_io import open_restoration
     from simsat.product import read_truth
+    from simsat.render.texture_bake import enable_bake
     from simsat.simulate import simulate
 
+    enable_bake()  # the points of a study mostly share their ground: its texture is synthesised once per worker
     t0 = _time.perf_counter()
     sc = load_scenario(base, overrides=overrides)
     simulate(sc, run_dir, progress=False)

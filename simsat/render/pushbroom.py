@@ -34,6 +34,7 @@ import numpy as np
 
 from . import choose_variant
 from .scene import build_terrain_scene
+from .texture_bake import TILE_STORE, bake_key, texture_fingerprint
 from ..sensor_model import los_body
 
 __all__ = ["RenderStats", "PushbroomRenderer", "ground_prefilter_kernel"]
@@ -53,6 +54,7 @@ class RenderStats:
     blocks: int = 0
     variant: str = ""
     misses: int = 0
+    baked_tiles: int = 0
     extra: dict = field(default_factory=dict)
 
     @property
@@ -109,10 +111,13 @@ class PushbroomRenderer:
         shading and shadows): flat-ground sun + sky light.
     lift_m : float
         Height above the highest terrain where rays start (float32 hand-off).
+    tile_store : simsat.render.texture_bake.TileStore, optional
+        Where prefiltered texture tiles are baked for later renders of the
+        same ground (default: the process-wide store).
     """
 
     def __init__(self, *, platform, instrument, dem, texture, attitude, irradiance=None, lift_m: float = 2000.0,
-                 texel_m: float | None = None, cloud_irradiance: float = 1.0):
+                 texel_m: float | None = None, cloud_irradiance: float = 1.0, tile_store=None):
         self.variant = choose_variant()
         import mitsuba as mi  # noqa: F401  (variant set)
 
@@ -128,6 +133,7 @@ class PushbroomRenderer:
         self.scene = build_terrain_scene(dem)
         self.z_lift = float(dem.z_max) + self.lift_m
         self.stats = RenderStats(variant=self.variant)
+        self.tile_store = TILE_STORE if tile_store is None else tile_store
 
     # -- geometry -------------------------------------------------------------
     def _subsample_offsets(self):
@@ -177,14 +183,35 @@ class PushbroomRenderer:
     def _tile(self, k: int) -> np.ndarray:
         """Prefiltered reflectance × irradiance of along-track tile ``k`` (all bands), cached.
 
+        A tile being prefetched (:meth:`_prefetch`) is waited for rather than
+        computed twice.
+        """
+        if k in self._tiles:
+            return self._tiles[k]
+        fut = self._pending.pop(k, None)
+        tex = None if fut is not None else self.tile_store.get(self._bake_key(k))
+        if tex is None:
+            tex, synth_s, filt_s = fut.result() if fut is not None else self._make_tile(k)
+            self.stats.texture_synthesis_s += synth_s
+            self.stats.prefilter_s += filt_s
+            self.tile_store.put(self._bake_key(k), tex)
+        else:
+            self.stats.baked_tiles += 1
+        # keep only tiles that later blocks may need (the push-broom moves forward)
+        for old in [j for j in self._tiles if j < k - 2]:
+            del self._tiles[old]
+        self._tiles[k] = tex
+        return tex
+
+    def _make_tile(self, k: int):
+        """Synthesise and prefilter tile ``k`` → (texture, synthesis s, prefilter s); no shared state.
+
         The tile is synthesised with a margin of the prefilter's half-width on
         every side, filtered, and cropped: since the texture is a function of
         absolute ground coordinates, the mosaic of tiles equals the prefiltered
         texture of the whole scene, and every texel is synthesised and filtered
         once.
         """
-        if k in self._tiles:
-            return self._tiles[k]
         te = self.texel_m
         pad = len(self._kernel) // 2 + 1
         x0 = k * self._tile_nx * te - pad * te
@@ -201,20 +228,34 @@ class PushbroomRenderer:
                                                cloud_irradiance=self.cloud_irradiance), dtype=np.float32)
         else:
             tex = np.asarray(self.texture.grid(x0, y0, te, nx, ny), dtype=np.float32)
-        self.stats.texture_synthesis_s += _time.perf_counter() - t0
-        t0 = _time.perf_counter()
+        t1 = _time.perf_counter()
         if len(self._kernel) > 1:
             import cv2
             kk = self._kernel.astype(np.float32)
             tex = np.stack([cv2.sepFilter2D(np.ascontiguousarray(b), cv2.CV_32F, kk, kk,
                                             borderType=cv2.BORDER_REPLICATE) for b in tex])
         tex = np.ascontiguousarray(tex[:, pad:pad + self._tile_ny, pad:pad + self._tile_nx])
-        self.stats.prefilter_s += _time.perf_counter() - t0
-        # keep only tiles that later blocks may need (the push-broom moves forward)
-        for old in [j for j in self._tiles if j < k - 2]:
-            del self._tiles[old]
-        self._tiles[k] = tex
-        return tex
+        return tex, t1 - t0, _time.perf_counter() - t1
+
+    def _prefetch(self, k: int) -> None:
+        """Start synthesising tile ``k`` in the background (overlaps the blocks that do not need it yet)."""
+        if k in self._tiles or k in self._pending:
+            return
+        baked = self.tile_store.get(self._bake_key(k))
+        if baked is not None:
+            self._tiles[k] = baked
+            self.stats.baked_tiles += 1
+            return
+        if self._executor is None:
+            from concurrent.futures import ThreadPoolExecutor
+            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="simsat-texture")
+        self._pending[k] = self._executor.submit(self._make_tile, k)
+
+    def _bake_key(self, k: int):
+        """Key of tile ``k`` in the process-wide store (:mod:`.texture_bake`), None when not bakeable."""
+        if self._bake_prefix is None:
+            return None
+        return (self._bake_prefix, int(k))
 
     def _texture_strip(self, x_min: float, x_max: float):
         """Prefiltered texture (nbands, ny, nx) covering [x_min, x_max] and its origin (x0, y0) [m]."""
@@ -222,6 +263,10 @@ class PushbroomRenderer:
         k0 = int(np.floor((x_min - 2 * te) / (self._tile_nx * te)))
         k1 = int(np.floor((x_max + 2 * te) / (self._tile_nx * te)))
         tex = np.concatenate([self._tile(k) for k in range(k0, k1 + 1)], axis=2) if k1 > k0 else self._tile(k0)
+        # the next block will most likely need the tile beyond, in the direction the strips move
+        step = -1 if k0 < self._last_k0 else 1
+        self._last_k0 = k0
+        self._prefetch(k1 + 1 if step > 0 else k0 - 1)
         x0 = k0 * self._tile_nx * te
         i0 = max(int(np.floor((x_min - x0) / te)) - 2, 0)
         i1 = min(int(np.ceil((x_max - x0) / te)) + 3, tex.shape[2])
@@ -293,12 +338,15 @@ class PushbroomRenderer:
         t1 = _time.perf_counter()
         si = self.scene.ray_intersect(ray)
         px, py, valid = si.p.x, si.p.y, si.is_valid()
+        # the intersection kernel runs asynchronously (Dr.Jit's thread pool or the GPU) while the
+        # host synthesises the texture strip this block needs; then wait for both
         dr.eval(px, py, valid)
-        dr.sync_thread()
         t2 = _time.perf_counter()
         tex, x0, y0 = self._strip_cache(x_min, x_max)
         bi = list(self.texture.bands).index(det.band)
         t3 = _time.perf_counter()
+        dr.sync_thread()
+        t3b = _time.perf_counter()
         band = tex[bi]
         ny, nx = band.shape
         te = self.texel_m
@@ -315,9 +363,9 @@ class PushbroomRenderer:
         st = self.stats
         st.rays += n
         st.raygen_s += t1 - t0
-        st.intersect_s += t2 - t1
+        st.intersect_s += (t2 - t1) + (t3b - t3)
         st.texture_s += t3 - t2
-        st.shade_s += t4 - t3
+        st.shade_s += t4 - t3b
         st.misses += misses
         st.blocks += 1
         # mean over time sub-samples and sub-pixels: (L, nt, C, S) -> (L, C)
@@ -326,6 +374,9 @@ class PushbroomRenderer:
     def _init_tiles(self):
         self._kernel = self._prefilter_kernel()
         self._tiles = {}
+        self._pending = {}
+        self._executor = None
+        self._last_k0 = -(2 ** 62)
         self._strip = None
         # across-track extent: every detector's edge columns over the DEM height range (+ margin)
         f = self.instrument.focal_length_m
@@ -337,6 +388,10 @@ class PushbroomRenderer:
                 ys.append(float(self.platform.nominal_ground_point(t_ref, b, self.dem.z_min)[1]))
         margin = 100.0
         self._setup_tiles(min(ys) - margin, max(ys) + margin)
+        self._bake_prefix = None
+        if self.tile_store.max_bytes > 0:
+            self._bake_prefix = bake_key(texture_fingerprint(self.texture), self.irradiance, self.cloud_irradiance,
+                                         self._kernel, (self.texel_m, self._tile_y0, self._tile_ny, self._tile_nx))
         along = [d.along_m + k * (d.rows - 1) / 2 * d.pitch_m for d in self.instrument.detectors for k in (-1, 1)]
         self._band_spread_m = (max(along) - min(along)) / f * self.platform.altitude_m
 
@@ -371,14 +426,25 @@ class PushbroomRenderer:
         Memory is bounded by one block of every detector, whatever the image length.
         """
         n_blocks = int(np.ceil(len(t_lines) / block_lines))
-        for bi in range(n_blocks):
-            t_start = _time.perf_counter()
-            sl = slice(bi * block_lines, min(len(t_lines), (bi + 1) * block_lines))
-            block = {det.name: self.render_block(det, t_lines[sl]) for det in self.instrument.detectors}
-            self.stats.wall_s += _time.perf_counter() - t_start
-            if progress is not None:
-                progress(sl.stop - sl.start)
-            yield sl, block
+        try:
+            for bi in range(n_blocks):
+                t_start = _time.perf_counter()
+                sl = slice(bi * block_lines, min(len(t_lines), (bi + 1) * block_lines))
+                block = {det.name: self.render_block(det, t_lines[sl]) for det in self.instrument.detectors}
+                self.stats.wall_s += _time.perf_counter() - t_start
+                if progress is not None:
+                    progress(sl.stop - sl.start)
+                yield sl, block
+        finally:
+            self._stop_prefetch()
+
+    def _stop_prefetch(self) -> None:
+        """Drop tiles prefetched for blocks that will not come and stop the background thread."""
+        ex = getattr(self, "_executor", None)
+        if ex is not None:
+            ex.shutdown(wait=True, cancel_futures=True)
+            self._executor = None
+            self._pending = {}
 
     def ray_intersect_ceiling(self, det, t_lines: np.ndarray, *, repeats: int = 3) -> float:
         """Raw ``scene.ray_intersect`` throughput [rays/s] on this block's rays (prepared beforehand)."""

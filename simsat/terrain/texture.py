@@ -311,6 +311,12 @@ class ProceduralTexture:
     def __setstate__(self, state):
         self.__init__(**state)
 
+    def fingerprint(self) -> str:
+        """A digest of every parameter :meth:`grid`'s values depend on (not ``workers``)."""
+        import hashlib
+        params = {k: v for k, v in self._init_kwargs.items() if k != "workers"}
+        return hashlib.sha256(repr(("ProceduralTexture", sorted(params.items()))).encode()).hexdigest()
+
     def __repr__(self) -> str:
         return (f"ProceduralTexture(seed={self.seed}, bands={self.bands}, water_fraction={self.water_fraction}, "
                 f"cloud_fraction={self.cloud_fraction}, urban_fraction={self.urban_fraction}, "
@@ -1042,6 +1048,18 @@ class OrthoTexture:
             return img
         except Exception as exc:
             raise ValueError(f"path: cannot read image {p}: {exc}") from None
+
+    def fingerprint(self) -> str:
+        """A digest of the image's bands, placement and output bands (what :meth:`grid` depends on)."""
+        fp = getattr(self, "_fingerprint", None)
+        if fp is None:
+            import hashlib
+            h = hashlib.sha256(repr(("OrthoTexture", self.x0_m, self.y0_m, self.texel_m, self.bands)).encode())
+            for name in sorted(self._img):
+                h.update(name.encode())
+                h.update(np.ascontiguousarray(self._img[name]).tobytes())
+            fp = self._fingerprint = h.hexdigest()
+        return fp
 
     @property
     def shape(self):
