@@ -97,8 +97,11 @@ class Restorer:
             restored = {a: knowledge[a] + correction[a] for a in AXES}
             anchored = False
             if s.anchor_star_tracker:
+                anchor_sigma = stages.anchoring_sigma(restored, product.time, product.star_tracker, s.axes,
+                                                      noise_rad=product.star_tracker_noise_rad)
                 restored, anchored = stages.anchor_on_star_tracker(restored, product.time, product.star_tracker,
                                                                    s.axes)
+                sigma = stages.add_anchoring_sigma(sigma, anchor_sigma)
             coverage = stages.check_coverage(restored, s, product.path, flagged)
             bar.step("integrated")
             t = _time.perf_counter()

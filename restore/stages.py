@@ -38,7 +38,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "yaw_pitch_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "check_coverage", "correct_images",
+           "knowledge_ceilings", "yaw_pitch_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -569,6 +569,25 @@ def remove_mean(estimate: dict, axes) -> dict:
     return out
 
 
+def _anchor_samples(values: np.ndarray, t_line: np.ndarray, star_tracker, axis: str):
+    """The star-tracker samples an axis is anchored on: ``(ts, residuals, tc, fit_slope)`` or None.
+
+    Samples inside the restored span; a slope is fitted with at least 3
+    samples spanning half the record or more (``tc``: the span's centre).
+    """
+    m = np.isfinite(values)
+    if not m.any():
+        return None
+    t0, t1 = t_line[m].min(), t_line[m].max()
+    sel = (star_tracker.time >= t0) & (star_tracker.time <= t1)
+    if sel.sum() < 1:
+        return None
+    ts = star_tracker.time[sel]
+    resid = getattr(star_tracker, axis)[sel] - np.interp(ts, t_line[m], values[m])
+    fit_slope = bool(sel.sum() >= 3 and ts.max() - ts.min() >= 0.5 * (t1 - t0))
+    return ts, resid, 0.5 * (t0 + t1), fit_slope
+
+
 def anchor_on_star_tracker(restored: dict, t_line: np.ndarray, star_tracker, axes) -> tuple[dict, bool]:
     """Absolute anchoring on the star tracker: what the images cannot see, the slowest part of the error.
 
@@ -585,23 +604,58 @@ def anchor_on_star_tracker(restored: dict, t_line: np.ndarray, star_tracker, axe
     if star_tracker is None:
         return out, anchored
     for a in axes:
-        m = np.isfinite(out[a])
-        if not m.any():
+        got = _anchor_samples(out[a], t_line, star_tracker, a)
+        if got is None:
             continue
-        t0, t1 = t_line[m].min(), t_line[m].max()
-        sel = (star_tracker.time >= t0) & (star_tracker.time <= t1)
-        if sel.sum() < 1:
-            continue
-        ts = star_tracker.time[sel]
-        resid = getattr(star_tracker, a)[sel] - np.interp(ts, t_line[m], out[a][m])
-        if sel.sum() >= 3 and ts.max() - ts.min() >= 0.5 * (t1 - t0):
-            tc = 0.5 * (t0 + t1)
+        ts, resid, tc, fit_slope = got
+        if fit_slope:
             slope, offset = np.polyfit(ts - tc, resid, 1)
             out[a] = out[a] + offset + slope * (t_line - tc)
         else:
             out[a] = out[a] + float(np.mean(resid))
         anchored = True
     return out, anchored
+
+
+def anchoring_sigma(restored: dict, t_line: np.ndarray, star_tracker, axes, *, noise_rad: float | None) -> dict:
+    """Per axis and line, the 1-σ the star-tracker anchoring adds to the restored angle [rad].
+
+    The anchoring's slope is fitted on a few noisy samples: its error ``s``
+    tilts the whole record, ``s (t − t̄)`` once the mean is removed (the
+    metric's convention: the offset's error is the unobservable constant). The
+    slope's 1-σ is ``σ_st / √Σ(tᵢ − t̄ₛ)²`` with ``σ_st`` the star tracker's
+    noise as the product records it (``noise_rad``), or, without it, estimated
+    from the fit's residuals (4 samples or more). Axes anchored by their mean
+    only, or not at all, get 0 (a drift left in the knowledge is not known).
+    ``restored`` is the attitude before anchoring (its finite lines).
+    """
+    out = {}
+    if star_tracker is None:
+        return out
+    for a in axes:
+        got = _anchor_samples(restored[a], t_line, star_tracker, a)
+        sig = np.zeros(t_line.shape)
+        if got is not None and got[3]:
+            ts, resid, tc, _ = got
+            sxx = float(np.sum((ts - ts.mean()) ** 2))
+            noise = noise_rad
+            if noise is None and ts.size >= 4:
+                slope, offset = np.polyfit(ts - tc, resid, 1)
+                noise = float(np.sqrt(np.sum((resid - offset - slope * (ts - tc)) ** 2) / (ts.size - 2)))
+            if noise is not None and sxx > 0:
+                m = np.isfinite(restored[a])
+                sig = noise / np.sqrt(sxx) * np.abs(t_line - t_line[m].mean())
+        out[a] = np.where(np.isfinite(restored[a]), sig, np.nan)
+    return out
+
+
+def add_anchoring_sigma(sigma: dict, anchor: dict) -> dict:
+    """The predicted σ of each axis with the anchoring's own (:func:`anchoring_sigma`) added in quadrature."""
+    out = dict(sigma)
+    for a, ps in sigma.items():
+        if a in anchor:
+            out[a] = replace(ps, sigma=np.sqrt(ps.sigma ** 2 + anchor[a] ** 2))
+    return out
 
 
 def check_coverage(restored: dict, settings: RestorationSettings, where, flagged: dict | None = None) -> dict:

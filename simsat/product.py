@@ -178,6 +178,12 @@ class Product:
         return np.asarray(self.ds["time"].values, dtype=np.float64)
 
     @property
+    def star_tracker_noise_rad(self) -> float | None:
+        """The star tracker's white noise per sample [rad] as the product records it (None: not recorded)."""
+        v = self.ds.attrs.get("star_tracker_noise_urad") if self.star_tracker is not None else None
+        return None if v is None else float(v) * 1e-6
+
+    @property
     def is_frames(self) -> bool:
         """A matrix detector's frames (:mod:`simsat.frames`): each "line" is a frame of (row, column)."""
         return str(self.ds.attrs.get("acquisition", "pushbroom")) == "frames"
@@ -243,13 +249,16 @@ class Product:
         return self.sensor_model().nominal_delay_s(ahead, behind)
 
 
-def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowledge_spec=None):
+def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowledge_spec=None,
+                    star_tracker_spec=None):
     """The ``product.nc`` dataset of scenario ``sc`` (the reader is :func:`read_product`).
 
     ``knowledge_spec`` (cut-off, rate, noise of the AOCS knowledge, as a ground
     segment knows its AOCS) is recorded in the attributes ``knowledge_cutoff_hz``,
     ``knowledge_rate_hz``, ``knowledge_noise_urad``: restoration derives from it
-    which frequencies the images must supply.
+    which frequencies the images must supply. ``star_tracker_spec`` (its noise
+    and rate) likewise in ``star_tracker_noise_urad``, ``star_tracker_rate_hz``
+    when the product carries star-tracker samples: the anchoring's uncertainty.
 
     ``images``: band → (line, column) DN, or None (streamed in afterwards by
     the renderer); ``kn``/``st``: knowledge and star-tracker attitude series;
@@ -316,6 +325,9 @@ def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowled
                                               "knowledge_noise_urad": float(knowledge_spec.noise_urad),
                                               "knowledge_filter": KNOWLEDGE_FILTER_NAMES[knowledge_spec.filter],
                                               "knowledge_filter_order": KNOWLEDGE_FILTER_ORDER}),
+        **({} if st is None or star_tracker_spec is None else
+           {"star_tracker_noise_urad": float(star_tracker_spec.noise_urad),
+            "star_tracker_rate_hz": float(star_tracker_spec.rate_hz)}),
         "attitude_convention": "body->local R = Rz(yaw) Ry(pitch) Rx(roll); roll moves image across-track",
     }
     return xr.Dataset(data, coords=coords, attrs=attrs)

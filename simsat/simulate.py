@@ -159,7 +159,8 @@ def _simulate_locked(sc: Scenario, out_dir: Path, *, progress: bool) -> Simulati
     t_truth = np.arange(t_lines[0] - inst.line_period_s, t_lines[-1] + inst.line_period_s + 1e-12, dt_truth)
     tr, tp, ty = model.evaluate(t_truth)
 
-    ds = product_dataset(sc, None, t_lines, kn, st, known_dem, knowledge_spec=model.knowledge)
+    ds = product_dataset(sc, None, t_lines, kn, st, known_dem, knowledge_spec=model.knowledge,
+                         star_tracker_spec=model.star_tracker)
     truth = xr.Dataset(
         {"roll": ("time", tr, {"units": "rad", "long_name": "true line-of-sight roll"}),
          "pitch": ("time", tp, {"units": "rad", "long_name": "true line-of-sight pitch"}),

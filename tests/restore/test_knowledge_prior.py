@@ -127,3 +127,35 @@ def test_anchoring_removes_an_offset_and_a_drift_the_images_cannot_see():
     out1, _ = anchor_on_star_tracker(restored, t, one, ("roll",))
     e = out1["roll"][m] - truth[m]
     assert abs(e[np.argmin(np.abs(t[m] - ts[3]))]) < 1e-8 and np.ptp(e) > 3e-6
+
+
+def test_anchoring_sigma_matches_the_spread_of_the_anchored_slope():
+    """The σ the anchoring adds (slope fitted on noisy star-tracker samples) against Monte Carlo."""
+    from restore.stages import anchor_on_star_tracker, anchoring_sigma
+    from simsat.attitude import AttitudeSeries
+
+    t = np.arange(4000) * 4e-4
+    ts = np.arange(-0.05, 1.6, 0.25)
+    noise = 1e-6
+    restored = {"roll": np.zeros_like(t), "pitch": np.zeros_like(t), "yaw": np.zeros_like(t)}
+    rng = np.random.default_rng(1)
+    sq = np.zeros_like(t)
+    n_draws = 400
+    for _ in range(n_draws):
+        st = AttitudeSeries(ts, noise * rng.standard_normal(ts.size), np.zeros_like(ts), np.zeros_like(ts))
+        out, _ = anchor_on_star_tracker(restored, t, st, ("roll",))
+        e = out["roll"] - out["roll"].mean()          # the metric's convention: mean removed
+        sq += e ** 2
+    actual = np.sqrt(sq / n_draws)
+    st = AttitudeSeries(ts, np.zeros_like(ts), np.zeros_like(ts), np.zeros_like(ts))
+    pred = anchoring_sigma(restored, t, st, ("roll",), noise_rad=noise)["roll"]
+    # analytic: slope σ = noise / √Σ(tᵢ − t̄)² over the samples inside the record, times |t − t̄|
+    inside = ts[(ts >= t[0]) & (ts <= t[-1])]
+    np.testing.assert_allclose(pred, noise / np.sqrt(np.sum((inside - inside.mean()) ** 2)) * np.abs(t - t.mean()))
+    assert abs(np.sqrt(np.mean(pred ** 2)) / np.sqrt(np.mean(actual ** 2)) - 1.0) < 0.1
+    # without the noise recorded, the fit's residuals estimate it (here: exact samples, no residual → 0)
+    assert np.allclose(anchoring_sigma(restored, t, st, ("roll",), noise_rad=None)["roll"], 0.0)
+    # mean-only anchoring (one sample) adds nothing the metric sees
+    one = AttitudeSeries(ts[2:3], ts[2:3] * 0, ts[2:3] * 0, ts[2:3] * 0)
+    assert np.all(anchoring_sigma(restored, t, one, ("roll",), noise_rad=noise)["roll"] == 0.0)
+    assert anchoring_sigma(restored, t, None, ("roll",), noise_rad=noise) == {}

@@ -153,3 +153,22 @@ def test_scene_brightness_scales_the_signal(tiny_run, tmp_path):
         ref = a[f"image_{band}"].values.astype(float)
         assert ref.max() < 4095
         assert b[f"image_{band}"].values.mean() / ref.mean() == pytest.approx(0.5, rel=0.01)
+
+
+def test_product_records_the_star_trackers_noise_when_it_carries_its_samples():
+    """The anchoring's uncertainty needs the star tracker's noise, as a ground segment knows its sensor."""
+    from simsat.product import product_dataset
+    from simsat.scenario import load_scenario
+
+    for enabled in (True, False):
+        sc = load_scenario("tiny", overrides={"attitude": {"star_tracker": {"enabled": enabled, "noise_urad": 1.5,
+                                                                              "rate_hz": 4.0}}})
+        model = sc.attitude_model()
+        dem, known = sc.dems()
+        ds = product_dataset(sc, None, sc.line_times, model.knowledge_series(), model.star_tracker_series(), known,
+                             knowledge_spec=model.knowledge, star_tracker_spec=model.star_tracker)
+        if enabled:
+            assert ds.attrs["star_tracker_noise_urad"] == 1.5 and ds.attrs["star_tracker_rate_hz"] == 4.0
+            assert "star_tracker_roll" in ds
+        else:
+            assert "star_tracker_noise_urad" not in ds.attrs and "star_tracker_roll" not in ds
