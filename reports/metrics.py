@@ -14,7 +14,7 @@ from restore.correction import correct_bands, misregistration, weak_band_misregi
 from simsat.attitude import AttitudeSeries
 from simsat.units import AXES
 
-__all__ = ["error_stats", "attitude_errors", "truth_at", "attitude_misregistration", "misregistration_floor"]
+__all__ = ["error_stats", "attitude_errors", "truth_at", "error_split_by_band", "attitude_misregistration", "misregistration_floor"]
 
 
 
@@ -30,6 +30,36 @@ def error_stats(error, *, ifov_rad: float) -> dict:
     p = float(np.percentile(np.abs(e), 99.7))
     return {"rms_px": rms / ifov_rad, "p997_px": p / ifov_rad, "rms_urad": rms * 1e6, "p997_urad": p * 1e6,
             "n": int(m.sum())}
+
+
+def error_split_by_band(error, dt: float, freq, band) -> tuple[float, float]:
+    """RMS of an error series inside and outside a frequency band (its periodogram split).
+
+    Over the longest run of finite samples, mean removed; the band is given on
+    a one-sided grid ``freq`` [Hz] (``band`` boolean, e.g. the unobservable
+    band of :func:`restore.observability.observability`) and read at the
+    periodogram's frequencies by nearest-neighbour interpolation. The two
+    parts' squares add up to the run's mean square (Parseval).
+
+    Returns
+    -------
+    (inside_rms, outside_rms) : float
+        In the error's unit; NaN when fewer than 16 finite samples.
+    """
+    from .report_data.series import longest_finite_run
+
+    e = np.asarray(error, dtype=np.float64)
+    sl = longest_finite_run(e)
+    e = e[sl]
+    if e.size < 16:
+        return float("nan"), float("nan")
+    e = e - e.mean()
+    spec = np.abs(np.fft.rfft(e)) ** 2
+    f = np.fft.rfftfreq(e.size, dt)
+    inside = np.interp(f, np.asarray(freq, dtype=np.float64), np.asarray(band, dtype=float)) >= 0.5
+    frac = float(spec[inside].sum() / max(spec.sum(), 1e-300))
+    rms = float(np.sqrt(np.mean(e ** 2)))
+    return rms * float(np.sqrt(frac)), rms * float(np.sqrt(1.0 - frac))
 
 
 def truth_at(truth, axis: str, t) -> np.ndarray:

@@ -8,7 +8,7 @@ from typing import Callable
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from reports.metrics import YAW_COUPLING_REPORTED, error_stats
+from reports.metrics import YAW_COUPLING_REPORTED, error_split_by_band, error_stats
 from restore.integration.wiener import spectrum_for_lines
 from restore.observability import observability
 from simsat.units import AXES
@@ -418,19 +418,13 @@ class _AxisBudget:
         prior = rec.spectrum or spectrum_for_lines(list(rec.diffs), list(rec.taus), rec.line_period_s)
         obs = observability(prior.freq, prior.psd, prior.noise_std, rec.taus, rec.line_period_s,
                             highpass_hz=rec.highpass_hz)
-        sl = longest_finite_run(total)
-        e = total[sl] - np.mean(total[sl])
-        if e.size < 16:
+        inside, outside = error_split_by_band(total, rec.line_period_s, obs.freq, obs.unobservable_band)
+        if not np.isfinite(inside):
             return []
-        spec = np.abs(np.fft.rfft(e)) ** 2
-        f = np.fft.rfftfreq(e.size, rec.line_period_s)
-        inside = np.interp(f, obs.freq, obs.unobservable_band.astype(float)) >= 0.5
-        frac = float(spec[inside].sum() / max(spec.sum(), 1e-300))
-        rms = float(np.sqrt(np.mean(e ** 2)))
+        n = longest_finite_run(total)
         out = []
-        for comp, v in (("total, in the unobservable band", rms * np.sqrt(frac)),
-                        ("total, outside it", rms * np.sqrt(1.0 - frac))):
+        for comp, v in (("total, in the unobservable band", inside), ("total, outside it", outside)):
             out.append({"axis": self.a, "component": comp, "rms_px": v / self.ifov, "p997_px": float("nan"),
-                        "rms_urad": v * 1e6, "p997_urad": float("nan"), "n": int(e.size),
+                        "rms_urad": v * 1e6, "p997_urad": float("nan"), "n": int(n.stop - n.start),
                         "note": "share of the total error's spectrum in / out of the band"})
         return out
