@@ -156,7 +156,8 @@ MEANING = {
                                    "(its recorded filter, rate and noise): nothing restored deep inside its band",
     "restoration.rematch": "coarse to fine: passes matching again in band B resampled into band A's geometry with "
                            "the estimate so far; \"auto\": one pass when the estimate moves by more than 0.3 px "
-                           "per line (RMS: large amplitude), else none",
+                           "per line (RMS: large amplitude), else none, and a second when that pass still "
+                           "moved the estimate by more than 0.01 px RMS",
     "restoration.rematch_search_lines": "search half-range of the rematch, lines [px]",
     "restoration.rematch_search_columns": "search half-range of the rematch, columns [px]",
     "restoration.posterior_samples": "Monte Carlo draws through the integration for the predicted 1-σ per line "

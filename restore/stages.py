@@ -37,7 +37,7 @@ from .synthesis import (
 )
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
-           "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
+           "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
            "knowledge_ceilings", "yaw_pitch_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
@@ -275,9 +275,28 @@ def line_rate_px(estimate: dict, axes, pixel_ifov_rad: float) -> float:
     return out
 
 
+#: "auto" rematch: another pass while the estimate moves by more than this between passes (RMS, worst axis) [px]
+REMATCH_CONVERGED_PX = 0.01
+#: "auto" rematch: at most this many passes
+MAX_AUTO_REMATCH = 2
+
+
+def estimate_change_px(before: dict, after: dict, axes, pixel_ifov_rad: float) -> float:
+    """RMS change between two estimates over the lines both restore, worst axis [px] (means removed)."""
+    out = 0.0
+    for a in axes:
+        d = np.asarray(after[a], dtype=np.float64) - np.asarray(before[a], dtype=np.float64)
+        d = d[np.isfinite(d)]
+        if d.size:
+            out = max(out, float(np.sqrt(np.mean((d - d.mean()) ** 2))) / pixel_ifov_rad)
+    return out
+
+
 def rematch_passes(setting, estimate: dict, axes, pixel_ifov_rad: float) -> int:
     """Passes of rematching: the number given, or for "auto" one when :func:`line_rate_px` exceeds
-    :data:`REMATCH_RATE_PX_PER_LINE` (large amplitude), else none."""
+    :data:`REMATCH_RATE_PX_PER_LINE` (large amplitude), else none. With "auto" the restorer adds
+    passes, up to :data:`MAX_AUTO_REMATCH`, while the last one moved the estimate by more than
+    :data:`REMATCH_CONVERGED_PX` (:func:`estimate_change_px`)."""
     if setting != "auto":
         return int(setting)
     return int(line_rate_px(estimate, axes, pixel_ifov_rad) > REMATCH_RATE_PX_PER_LINE)

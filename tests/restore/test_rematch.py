@@ -108,3 +108,16 @@ def test_auto_rematches_only_at_large_rates():
     assert rematch_passes("auto", slow, ("roll", "pitch"), ifov) == 0
     assert rematch_passes("auto", fast, ("roll", "pitch"), ifov) == 1
     assert rematch_passes(2, slow, ("roll", "pitch"), ifov) == 2
+
+
+def test_estimate_change_is_the_worst_axis_rms_without_the_mean():
+    from restore.stages import estimate_change_px
+
+    ifov = 4e-6
+    t = np.arange(1000) * 4e-4
+    before = {"roll": np.zeros_like(t), "pitch": np.zeros_like(t)}
+    after = {"roll": 5.0 + 0.02 * ifov * np.sqrt(2) * np.sin(2 * np.pi * 50 * t),   # a constant does not count
+             "pitch": 0.05 * ifov * np.sqrt(2) * np.sin(2 * np.pi * 70 * t)}
+    after["pitch"][:10] = np.nan                                                     # lines one of them lacks
+    assert abs(estimate_change_px(before, after, ("roll", "pitch"), ifov) - 0.05) < 1e-3
+    assert abs(estimate_change_px(before, after, ("roll",), ifov) - 0.02) < 1e-3
