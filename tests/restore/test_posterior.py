@@ -32,8 +32,9 @@ def _coloured_psd(f, rms=2e-6, corner=40.0, band=(10.0, 120.0)):
     return shape * rms ** 2 / (2 * shape.sum() * df)
 
 
-def _record(valid=None, noise=0.3e-6, seed=1, weights=None, noise_true=None):
-    """A record integrated with the frozen Wiener filter of a known prior and noise; diffs drawn from that model."""
+def _record(valid=None, noise=0.3e-6, seed=1, weights=None, noise_true=None, noise_colour=None):
+    """A record integrated with the frozen Wiener filter of a known prior and noise; diffs drawn from that model
+    (the true noise: ``noise_true`` per line, white or with its power shaped by ``noise_colour(f)``)."""
     f = np.fft.rfftfreq(8192, DT)
     psd = _coloured_psd(f)
     rng = np.random.default_rng(seed)
@@ -41,7 +42,11 @@ def _record(valid=None, noise=0.3e-6, seed=1, weights=None, noise_true=None):
     lags = np.zeros((3, N))
     valid = np.ones((3, N), bool) if valid is None else valid
     d = simulated_differentials(th, TAUS, lags, valid, DT)
-    d = d + (noise if noise_true is None else noise_true) * rng.standard_normal(d.shape)
+    w = rng.standard_normal(d.shape)
+    if noise_colour is not None:
+        from scipy.fft import irfft, rfft
+        w = irfft(rfft(w, axis=-1) * np.sqrt(noise_colour(np.fft.rfftfreq(N, DT))), n=N, axis=-1)
+    d = d + (noise if noise_true is None else noise_true) * w
     spec = PriorSpectrum(f, psd, np.full(3, noise))
     rec = IntegrationRecord(axis="roll", pairs=["a/b", "b/c", "a/c"], diffs=d, sigmas=np.full((3, N), noise),
                             taus=np.array(TAUS), lags_s=lags, weights=np.ones((3, N)) if weights is None else weights,
@@ -154,3 +159,23 @@ def test_same_seed_same_bytes():
     assert a.tobytes() == b.tobytes()
     with pytest.raises(ValueError, match="samples"):
         posterior_sigma(rec, samples=1)
+
+
+def test_noise_rising_in_a_band_is_caught_band_by_band():
+    """Matching noise 8× the white level in power over 10–40 Hz: the prediction follows the actual errors."""
+    def colour(f):
+        return np.where((f >= 10.0) & (f <= 40.0), 8.0, 1.0)
+
+    rec, _ = _record(seed=5, noise_colour=colour)
+    ps = posterior_sigma(rec, samples=16, seed=7, check_noise=True)
+    white = posterior_sigma(rec, samples=16, seed=7, check_noise=False)
+    errs = []
+    for s in range(10):
+        r, th = _record(seed=200 + s, noise_colour=colour)
+        e = r.increment - th[:N]
+        errs.append(e - np.nanmean(e))
+    actual = np.sqrt(np.nanmean(np.array(errs) ** 2))
+    predicted = np.sqrt(np.nanmean(ps.sigma ** 2))
+    assert actual == pytest.approx(predicted, rel=0.2)
+    assert np.sqrt(np.nanmean(white.sigma ** 2)) < 0.8 * actual      # the white model alone is optimistic
+    assert ps.noise_scale > 1.0                                        # (an RMS over all frequencies)
