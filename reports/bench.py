@@ -14,7 +14,10 @@ import numpy as np
 from reports import bench_integration, bench_matching
 from reports.history import HISTORY_FILE, append_record, make_record
 from reports.metrics import (
+    CLEAR_LINE_MIN_FRACTION,
     attitude_errors,
+    clear_line_coverage,
+    clear_line_fraction,
     attitude_misregistration,
     error_split_by_band,
     misregistration_floor,
@@ -451,6 +454,9 @@ def bench_robustness(*, lines: int | None = None) -> dict:
                                                     for a in axes})
             row["actual_over_predicted"] = {a: e["errors"][a]["rms_px"] / row["predicted_rms_px"][a]
                                             for a in row["predicted_rms_px"]}
+            clear = clear_line_fraction(read_product(e["run_dir"]), load_scenario(str(path)).texture())
+            row["clear_lines"] = float(np.mean(clear >= CLEAR_LINE_MIN_FRACTION))
+            row["coverage_of_clear_lines"] = {a: clear_line_coverage(res.restored[a], clear) for a in axes}
             if "rms_px_without_yaw_coupling" in e["errors"].get("pitch", {}):
                 row["pitch_without_yaw_coupling_rms_px"] = e["errors"]["pitch"]["rms_px_without_yaw_coupling"]
                 row["yaw_pitch_coupling"] = e["errors"]["pitch"]["yaw_pitch_coupling"]
@@ -485,6 +491,11 @@ def _format_robustness(r: dict) -> list:
                       if a in row.get("actual_over_predicted", {}))
         out.append(f"  {row['scenario']:24s}{cells}  {aocs:8.3f} {cov * 100:8.1f}% {uo:>13s} {oo:>12s} {fl:>12s} {ps:>12s} "
                    f"{ra:>10s}  {verdict}")
+        if row.get("clear_lines", 1.0) < 0.95:
+            cc = "/".join(f"{row['coverage_of_clear_lines'][a] * 100:.1f}" for a in ("roll", "pitch")
+                          if a in row["coverage_of_clear_lines"])
+            out.append(f"  {'':24s} clear lines (half their columns on land, no cloud): {row['clear_lines'] * 100:.1f} %, "
+                       f"restored {cc} % of them")
         if "pitch_without_yaw_coupling_rms_px" in row:
             out.append(f"  {'':24s} pitch without the yaw seen as pitch ({row['yaw_pitch_coupling']:.3f} × missed yaw): "
                        f"{row['pitch_without_yaw_coupling_rms_px']:.4f} px RMS")

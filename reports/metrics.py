@@ -14,7 +14,8 @@ from restore.correction import correct_bands, misregistration, weak_band_misregi
 from simsat.attitude import AttitudeSeries
 from simsat.units import AXES
 
-__all__ = ["error_stats", "attitude_errors", "truth_at", "error_split_by_band", "attitude_misregistration", "misregistration_floor"]
+__all__ = ["error_stats", "attitude_errors", "truth_at", "error_split_by_band", "clear_line_fraction",
+           "clear_line_coverage", "attitude_misregistration", "misregistration_floor"]
 
 
 
@@ -60,6 +61,44 @@ def error_split_by_band(error, dt: float, freq, band) -> tuple[float, float]:
     frac = float(spec[inside].sum() / max(spec.sum(), 1e-300))
     rms = float(np.sqrt(np.mean(e ** 2)))
     return rms * float(np.sqrt(frac)), rms * float(np.sqrt(1.0 - frac))
+
+
+#: a line is "clear" when at least this fraction of its columns sees land that is neither cloud nor water
+CLEAR_LINE_MIN_FRACTION = 0.5
+
+
+def clear_line_fraction(product, texture, *, column_step: int = 16) -> np.ndarray:
+    """Per line of the reference band: the fraction of its columns whose ground is clear land (truth).
+
+    The ground point of every ``column_step``-th column (direct location with
+    the knowledge attitude: a pixel or two off the truth, nothing at the
+    scale of a cloud) is classified by the scene's texture
+    (``texture.land_cover``): cloud (opacity above ½) and water are not
+    clear. A texture that does not know its land cover (an orthoimage) gives
+    NaN.
+    """
+    from simsat.terrain.texture import LandCover
+
+    ref = product.reference_detector
+    n_lines, n_cols = product.image_shapes[ref]
+    cols = np.unique(np.r_[np.arange(0, n_cols, max(int(column_step), 1)), n_cols - 1]).astype(np.float64)
+    lines = np.arange(n_lines, dtype=np.float64)
+    g = product.sensor_model().direct_location(ref, lines[:, None], cols[None, :])
+    ok = np.all(np.isfinite(g), axis=-1)
+    cls = np.full(ok.shape, LandCover.UNKNOWN, dtype=np.uint8)
+    cls[ok] = texture.land_cover(g[..., 0][ok], g[..., 1][ok])
+    if np.all(cls[ok] == LandCover.UNKNOWN):
+        return np.full(n_lines, np.nan)
+    clear = ok & (cls != LandCover.CLOUD) & (cls != LandCover.WATER) & (cls != LandCover.UNKNOWN)
+    return clear.mean(axis=1)
+
+
+def clear_line_coverage(restored, clear_fraction, *, min_clear: float = CLEAR_LINE_MIN_FRACTION) -> float:
+    """Fraction of the clear lines (``clear_fraction >= min_clear``) that are restored (finite); NaN if none."""
+    clear = np.asarray(clear_fraction, dtype=np.float64) >= min_clear
+    if not clear.any():
+        return float("nan")
+    return float(np.mean(np.isfinite(np.asarray(restored, dtype=np.float64))[clear]))
 
 
 def truth_at(truth, axis: str, t) -> np.ndarray:
