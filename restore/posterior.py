@@ -72,11 +72,16 @@ class PosteriorSigma:
         Factor applied to the modelled noise after the residual check (≥ 1).
     samples : int
         Monte Carlo draws.
+    noise_colour : ndarray (pair, lines // 2 + 1) or None
+        The factor on each pair's noise power, per frequency of
+        ``rfftfreq(lines, Δt)``, that the band-by-band check found (1: as
+        modelled); None without the check.
     """
 
     sigma: np.ndarray
     noise_scale: float
     samples: int
+    noise_colour: np.ndarray | None = None
 
 
 def noise_per_line(record) -> np.ndarray:
@@ -296,6 +301,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     edges = _band_edges(n)
     errs, sim = run(None, samples)
     scale = 1.0
+    colour = None
     if check_noise:
         real = band_power(fit_residuals(d, np.asarray(record.increment, dtype=np.float64), taus, record.lags_s, dt,
                                         highpass_hz=record.highpass_hz), edges)
@@ -310,7 +316,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
         num = uniform_filter1d(np.where(ok, var, 0.0), smooth_lines, mode="nearest")
         den = uniform_filter1d(ok.astype(np.float64), smooth_lines, mode="nearest")
         var = np.where(ok, num / np.maximum(den, 1e-12), np.nan)
-    return PosteriorSigma(sigma=np.sqrt(var), noise_scale=float(scale), samples=int(samples))
+    return PosteriorSigma(sigma=np.sqrt(var), noise_scale=float(scale), samples=int(samples), noise_colour=colour)
 
 
 def _prior(record) -> tuple[np.ndarray, np.ndarray]:

@@ -92,6 +92,9 @@ class Restorer:
             t = _time.perf_counter()
             sigma = stages.predicted_sigma(records, product, s)
             timings["posterior_s"] = _time.perf_counter() - t
+            pairs, records, estimate, sigma = self.lower_highpass(product, pairs, knowledge, records, estimate,
+                                                                   sigma, timings, bar)
+            s = self.settings
             estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad)
             correction = stages.remove_mean(estimate, s.axes)
             restored = {a: knowledge[a] + correction[a] for a in AXES}
@@ -212,6 +215,29 @@ class Restorer:
             if a not in s.axes:
                 estimate[a] = np.zeros(n_lines)
         return pairs, records, estimate
+
+    def lower_highpass(self, product: Product, pairs: list, knowledge: dict, records: dict, estimate: dict,
+                       sigma: dict, timings: dict, bar) -> tuple:
+        """With ``highpass_hz = "auto"``: when the AOCS knowledge is noisy enough that the images beat it well
+        below the default high-pass (:func:`stages.knowledge_crossover_hz` under
+        :data:`stages.CROSSOVER_FRACTION` of it), integrate again with the high-pass at that crossover.
+
+        Returns (pairs, records, estimate, sigma), new or as given.
+        """
+        s = self.settings
+        if self._given.highpass_hz != "auto" or not sigma:
+            return pairs, records, estimate, sigma
+        fx = stages.knowledge_crossover_hz(records, sigma, product, s.highpass_hz)
+        if fx is None or fx >= stages.CROSSOVER_FRACTION * s.highpass_hz:
+            return pairs, records, estimate, sigma
+        bar.note(f"AOCS knowledge noisy: high-pass {s.highpass_hz:.2f} → {fx:.2f} Hz, integrating again")
+        t = _time.perf_counter()
+        self.settings = s = replace(s, highpass_hz=fx)
+        pairs, records, estimate = self.synthesise_and_integrate(product, pairs, knowledge, {}, bar)
+        sigma = stages.predicted_sigma(records, product, s)
+        timings["highpass_lowered_hz"] = fx
+        timings["highpass_lowering_s"] = _time.perf_counter() - t
+        return pairs, records, estimate, sigma
 
     def rematch(self, product: Product, pairs: list, knowledge: dict, records: dict, estimate: dict, timings: dict,
                 bar) -> tuple:

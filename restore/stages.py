@@ -38,7 +38,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "yaw_pitch_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -453,6 +453,54 @@ def highpass_from_product(setting, product: Product) -> float:
     if cutoff is None:
         return HIGHPASS_WITHOUT_KNOWLEDGE_SPEC_HZ
     return HIGHPASS_FRACTION_OF_KNOWLEDGE * float(cutoff)
+
+
+#: "auto" high-pass: lowered to the knowledge crossover only when that lies below this fraction of the default
+CROSSOVER_FRACTION = 0.5
+
+
+def knowledge_crossover_hz(records: dict, sigma: dict, product: Product, highpass_hz: float) -> float | None:
+    """Where the images' error falls below the AOCS knowledge's noise, worst restored axis [Hz]; None if unknown.
+
+    Below the high-pass the restored angle is the knowledge's, whose white
+    noise of ``σ_k`` per sample at ``f_k`` (recorded in product.nc) has the PSD
+    ``E_k = σ_k² / f_k``; above, the images' error at low frequency is
+    ``1 / Σ_j |G_j(f)|² / N_j`` with ``|G_j| ≈ 2π f τ_j`` and ``N_j`` each
+    pair's noise PSD there — its white level ``σ_j² Δt`` times the colour the
+    predicted σ's band-by-band check measured at the current high-pass
+    (matching noise rises towards low frequencies). The two cross at
+
+        f* = 1 / (2π √(E_k Σ_j τ_j² / N_j)).
+
+    The larger crossover of the restored axes is returned (a high-pass both
+    can afford). None without the knowledge's noise in the product or without
+    the measured colour (``posterior_samples = 0``): the white level alone
+    underestimates the low-frequency noise 3-4× and would put the crossover
+    too low.
+    """
+    attrs = product.ds.attrs
+    if "knowledge_noise_urad" not in attrs or "knowledge_rate_hz" not in attrs:
+        return None
+    e_k = (float(attrs["knowledge_noise_urad"]) * RAD_PER_URAD) ** 2 / float(attrs["knowledge_rate_hz"])
+    if e_k <= 0:
+        return None
+    out = None
+    for a, rec in records.items():
+        ps = sigma.get(a)
+        if ps is None or ps.noise_colour is None or rec.spectrum is None:
+            return None
+        dt = float(rec.line_period_s)
+        n = np.asarray(rec.diffs).shape[1]
+        f = np.fft.rfftfreq(n, dt)
+        k = int(np.clip(np.searchsorted(f, max(highpass_hz, f[1])), 0, f.size - 1))
+        noise = np.asarray(rec.spectrum.noise_std, dtype=np.float64) ** 2 * dt * ps.noise_colour[:, k]
+        taus = np.asarray(rec.taus, dtype=np.float64)
+        s = float(np.sum(taus ** 2 / noise))
+        if not np.isfinite(s) or s <= 0:
+            return None
+        fx = 1.0 / (2 * np.pi * np.sqrt(e_k * s))
+        out = fx if out is None else max(out, fx)
+    return out
 
 
 def knowledge_ceilings(product: Product, knowledge: dict, settings: RestorationSettings) -> dict:

@@ -159,3 +159,36 @@ def test_anchoring_sigma_matches_the_spread_of_the_anchored_slope():
     one = AttitudeSeries(ts[2:3], ts[2:3] * 0, ts[2:3] * 0, ts[2:3] * 0)
     assert np.all(anchoring_sigma(restored, t, one, ("roll",), noise_rad=noise)["roll"] == 0.0)
     assert anchoring_sigma(restored, t, None, ("roll",), noise_rad=noise) == {}
+
+
+def test_knowledge_crossover_follows_the_formula_and_the_knowledge_noise():
+    """f* = 1 / (2π √(E_k Σ τ_j² / N_j)); noisier knowledge → lower crossover; no colour or no spec → None."""
+    from types import SimpleNamespace
+
+    from restore.posterior import PosteriorSigma
+    from restore.stages import knowledge_crossover_hz
+
+    dt, n = 4e-4, 4000
+    taus = np.array([7.4e-3, 14.8e-3, 22.2e-3])
+    noise_std = np.array([0.3e-6, 0.4e-6, 0.35e-6])
+    rec = SimpleNamespace(line_period_s=dt, diffs=np.zeros((3, n)), taus=taus,
+                          spectrum=SimpleNamespace(noise_std=noise_std))
+    colour = np.ones((3, n // 2 + 1))
+    colour[:, : 100] = 4.0                               # 4× the white power below 62.5 Hz (100 bins)
+    ps = PosteriorSigma(sigma=np.zeros(n), noise_scale=1.0, samples=8, noise_colour=colour)
+
+    def product(noise_urad, rate=64.0):
+        return SimpleNamespace(ds=SimpleNamespace(attrs={"knowledge_noise_urad": noise_urad, "knowledge_rate_hz": rate}))
+
+    e_k = (0.3e-6) ** 2 / 64.0
+    n_j = noise_std ** 2 * dt * 4.0
+    expect = 1.0 / (2 * np.pi * np.sqrt(e_k * np.sum(taus ** 2 / n_j)))
+    got = knowledge_crossover_hz({"roll": rec}, {"roll": ps}, product(0.3), 2.0)
+    assert got == pytest.approx(expect, rel=1e-12)
+    # 4× the knowledge noise (16× its power): the crossover 4× lower
+    assert knowledge_crossover_hz({"roll": rec}, {"roll": ps}, product(1.2), 2.0) == pytest.approx(expect / 4)
+    # read above the coloured band, the white level: crossover lower by 2
+    assert knowledge_crossover_hz({"roll": rec}, {"roll": ps}, product(0.3), 100.0) == pytest.approx(expect / 2)
+    no_colour = PosteriorSigma(sigma=np.zeros(n), noise_scale=1.0, samples=8)
+    assert knowledge_crossover_hz({"roll": rec}, {"roll": no_colour}, product(0.3), 2.0) is None
+    assert knowledge_crossover_hz({"roll": rec}, {"roll": ps}, SimpleNamespace(ds=SimpleNamespace(attrs={})), 2.0) is None

@@ -524,3 +524,23 @@ def test_gradient_reader_equals_the_whole_band_gradient():
     read = _gradient_reader(lambda s: img[s], 50)
     for s in (slice(0, 7), slice(10, 30), slice(44, 50)):
         np.testing.assert_array_equal(read(s), whole[s])
+
+
+def test_a_noisy_aocs_knowledge_lowers_the_auto_highpass(tiny_restored, tmp_path):
+    """The product says its knowledge is noisy: the images take over below the default high-pass."""
+    d, res0 = tiny_restored
+    run = tmp_path / "tiny"
+    shutil.copytree(d, run)
+    ds = xr.load_dataset(run / "product.nc")
+    ds.attrs["knowledge_noise_urad"] = 30.0              # 100× what tiny's AOCS claims
+    ds.to_netcdf(run / "product_noisy.nc")
+    shutil.move(run / "product_noisy.nc", run / "product.nc")
+    res = restore_run(run, progress=False, overrides={"correct_images": False})
+    assert res.settings.highpass_hz < 0.5 * res0.settings.highpass_hz
+    assert res.timings["highpass_lowered_hz"] == res.settings.highpass_hz
+    assert all(rec.highpass_hz == res.settings.highpass_hz for rec in res.integration.values())
+    # a given high-pass is kept as given; so is the default without the measured noise colour
+    assert restore_run(run, progress=False, overrides={"correct_images": False, "highpass_hz": 2.0}
+                       ).settings.highpass_hz == 2.0
+    assert restore_run(run, progress=False, overrides={"correct_images": False, "posterior_samples": 0}
+                       ).settings.highpass_hz == res0.settings.highpass_hz
