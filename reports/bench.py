@@ -43,7 +43,7 @@ def _peak_rss_gb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 ** 2  # kB → GB
 
 
-def _render_stats(r, st, ceiling: float) -> dict:
+def _render_stats(st, ceiling: float) -> dict:
     """Throughput figures of one render (its stats ``st``) against the ray_intersect ceiling."""
     path_s = max(st.raygen_s + st.intersect_s + st.shade_s, 1e-9)
     return {
@@ -85,15 +85,16 @@ def _render_measure(scenario: str, lines: int | None, full: bool) -> dict:
     ceiling = float(np.mean(ceilings))
     out = {"scenario": sc.name, "lines": int(len(t_lines)), "pixels": int(sc.instrument.detectors[0].pixels),
            "bands": len(sc.instrument.detectors), "ray_intersect_ceiling_rays_per_s": ceiling}
-    out.update(_render_stats(r, r.stats, ceiling))
+    out.update(_render_stats(r.stats, ceiling))
+    out["peak_rss_gb"] = _peak_rss_gb()      # the first render's (the second one holds the bake too)
     r2 = make_renderer(sc, model, dem, texture, irr)
     again = r2.render(t_lines, block_lines=sc.acquisition.block_lines)
-    baked = _render_stats(r2, r2.stats, ceiling)
+    baked = _render_stats(r2.stats, ceiling)
     baked["same_bytes_as_first"] = all(np.array_equal(first[k], again[k]) for k in first)
     baked["bake_mib"] = store.nbytes / 2 ** 20
     out["baked"] = baked
-    out.update({"world_build_s": t_world, "scene_build_s": t_scene, "peak_rss_gb": _peak_rss_gb(),
-                "cpu_count": os.cpu_count()})
+    baked["peak_rss_gb"] = _peak_rss_gb()
+    out.update({"world_build_s": t_world, "scene_build_s": t_scene, "cpu_count": os.cpu_count()})
     return out
 
 
@@ -415,15 +416,12 @@ def _predicted_rms(res, axis: str) -> float:
 
 def _outside_unobservable_rms(res, run_dir: Path, axis: str) -> float:
     """With truth: RMS of the restored error outside the axis's unobservable band [rad] (the "Done when" figure)."""
-    from restore.integration.wiener import spectrum_for_lines
-    from restore.observability import observability
+    from restore.observability import record_observability
 
     rec = res.integration.get(axis)
     if rec is None:
         return float("nan")
-    prior = rec.spectrum or spectrum_for_lines(list(rec.diffs), list(rec.taus), rec.line_period_s)
-    obs = observability(prior.freq, prior.psd, prior.noise_std, rec.taus, rec.line_period_s,
-                        highpass_hz=rec.highpass_hz)
+    obs = record_observability(rec)
     err = res.restored[axis] - truth_at(read_truth(run_dir), axis, res.time)
     return error_split_by_band(err, rec.line_period_s, obs.freq, obs.unobservable_band)[1]
 
@@ -455,8 +453,10 @@ def bench_robustness(*, lines: int | None = None) -> dict:
             row["actual_over_predicted"] = {a: e["errors"][a]["rms_px"] / row["predicted_rms_px"][a]
                                             for a in row["predicted_rms_px"]}
             clear = clear_line_fraction(read_product(e["run_dir"]), load_scenario(str(path)).texture())
-            row["clear_lines"] = float(np.mean(clear >= CLEAR_LINE_MIN_FRACTION))
-            row["coverage_of_clear_lines"] = {a: clear_line_coverage(res.restored[a], clear) for a in axes}
+            known = not np.all(np.isnan(clear))       # an orthoimage does not know its land cover
+            row["clear_lines"] = float(np.mean(clear >= CLEAR_LINE_MIN_FRACTION)) if known else float("nan")
+            row["coverage_of_clear_lines"] = {a: clear_line_coverage(res.restored[a], clear) if known
+                                              else float("nan") for a in axes}
             if "rms_px_without_yaw_coupling" in e["errors"].get("pitch", {}):
                 row["pitch_without_yaw_coupling_rms_px"] = e["errors"]["pitch"]["rms_px_without_yaw_coupling"]
                 row["yaw_pitch_coupling"] = e["errors"]["pitch"]["yaw_pitch_coupling"]

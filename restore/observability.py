@@ -33,7 +33,7 @@ import numpy as np
 
 from .integration.transfer import fused_snr
 
-__all__ = ["Observability", "fused_snr", "observability", "band_power"]
+__all__ = ["Observability", "fused_snr", "observability", "record_observability", "band_power"]
 
 
 @dataclass
@@ -81,3 +81,14 @@ def observability(freq, psd, noise_std, taus, dt: float, *, highpass_hz: float =
     return Observability(freq=f, snr=snr, unobservable_band=band,
                          unobservable_rms_rad=float(np.sqrt(band_power(f, s, band))),
                          floor_rms_rad=float(np.sqrt(band_power(f, err, images))))
+
+
+def record_observability(record) -> Observability:
+    """:func:`observability` of an axis's integration record: its prior (or, for a method that reports
+    none, the spectrum estimated from its differentials), its noise, pairs, sampling and high-pass."""
+    prior = record.spectrum
+    if prior is None:
+        from .integration.wiener import spectrum_for_lines
+        prior = spectrum_for_lines(list(record.diffs), list(record.taus), record.line_period_s)
+    return observability(prior.freq, prior.psd, prior.noise_std, record.taus, record.line_period_s,
+                         highpass_hz=record.highpass_hz)

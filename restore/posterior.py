@@ -172,7 +172,7 @@ def _band_edges(n: int, bands: int = CHECK_BANDS, min_bins: int = CHECK_BAND_BIN
         starts.append(i)
         i += max(min_bins, int(i * (growth - 1.0)))
     starts.append(nf)
-    return starts
+    return starts if len(starts) > 1 else [1, max(nf, 2)]   # a very short record: one band of all its bins
 
 
 def band_power(residuals: np.ndarray, edges: list) -> np.ndarray:
@@ -279,7 +279,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     ext = n + int(np.ceil((max(taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
     rng = np.random.default_rng(seed)
 
-    def run(colour, k: int):
+    def run(colour, k: int, check: bool):
         errs, resid = [], []
         for _ in range(k):
             th = prior_draw(freq, psd, ext, dt, rng)
@@ -293,13 +293,13 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
             if ok.any():
                 e = e - np.mean(e[ok])
             errs.append(e)
-            if check_noise:
+            if check:
                 resid.append(band_power(fit_residuals(ds, est, taus, lags, dt, highpass_hz=record.highpass_hz),
                                         edges))
         return np.array(errs), resid
 
     edges = _band_edges(n)
-    errs, sim = run(None, samples)
+    errs, sim = run(None, samples, check_noise)
     scale = 1.0
     colour = None
     if check_noise:
@@ -308,7 +308,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
         colour = noise_colour_from_check(real, np.mean(sim, axis=0), edges, n)
         if np.any(colour > 1.0):
             scale = float(np.sqrt(np.mean(colour)))
-            errs, _ = run(colour, samples)
+            errs, _ = run(colour, samples, False)
     ok = np.isfinite(errs).any(axis=0)
     var = np.where(ok, np.nanmean(np.where(np.isfinite(errs), errs ** 2, 0.0), axis=0) * errs.shape[0]
                    / np.maximum(np.isfinite(errs).sum(axis=0), 1), np.nan)

@@ -97,8 +97,11 @@ def render_frames(renderer, det: Detector, frame_times: np.ndarray, *, progress=
     """
     t = np.asarray(frame_times, dtype=np.float64)
     out = np.empty((len(t), det.rows, det.pixels), dtype=np.float32)
-    for r in range(det.rows):
-        out[:, r, :] = renderer.render_block(row_detector(det, r), t)
-        if progress is not None:
-            progress(len(t))
+    try:
+        for r in range(det.rows):
+            out[:, r, :] = renderer.render_block(row_detector(det, r), t)
+            if progress is not None:
+                progress(len(t))
+    finally:
+        renderer.stop_prefetch()  # the frames path calls render_block itself: end the prefetch here
     return out

@@ -9,8 +9,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from reports.metrics import YAW_COUPLING_REPORTED, error_split_by_band, error_stats
-from restore.integration.wiener import spectrum_for_lines
-from restore.observability import observability
+from restore.observability import record_observability
 from simsat.units import AXES
 
 from .headline import attitude_table, restored_axes
@@ -415,9 +414,7 @@ class _AxisBudget:
         rec = axis_integration(self.run, self.a)["record"]
         if rec is None:
             return []
-        prior = rec.spectrum or spectrum_for_lines(list(rec.diffs), list(rec.taus), rec.line_period_s)
-        obs = observability(prior.freq, prior.psd, prior.noise_std, rec.taus, rec.line_period_s,
-                            highpass_hz=rec.highpass_hz)
+        obs = record_observability(rec)
         inside, outside = error_split_by_band(total, rec.line_period_s, obs.freq, obs.unobservable_band)
         if not np.isfinite(inside):
             return []

@@ -264,7 +264,8 @@ class PushbroomRenderer:
         k1 = int(np.floor((x_max + 2 * te) / (self._tile_nx * te)))
         tex = np.concatenate([self._tile(k) for k in range(k0, k1 + 1)], axis=2) if k1 > k0 else self._tile(k0)
         # the next block will most likely need the tile beyond, in the direction the strips move
-        step = -1 if k0 < self._last_k0 else 1
+        # (forward until a strip has been seen to move back)
+        step = -1 if self._last_k0 is not None and k0 < self._last_k0 else 1
         self._last_k0 = k0
         self._prefetch(k1 + 1 if step > 0 else k0 - 1)
         x0 = k0 * self._tile_nx * te
@@ -376,7 +377,7 @@ class PushbroomRenderer:
         self._tiles = {}
         self._pending = {}
         self._executor = None
-        self._last_k0 = -(2 ** 62)
+        self._last_k0 = None
         self._strip = None
         # across-track extent: every detector's edge columns over the DEM height range (+ margin)
         f = self.instrument.focal_length_m
@@ -436,15 +437,24 @@ class PushbroomRenderer:
                     progress(sl.stop - sl.start)
                 yield sl, block
         finally:
-            self._stop_prefetch()
+            self.stop_prefetch()
 
-    def _stop_prefetch(self) -> None:
-        """Drop tiles prefetched for blocks that will not come and stop the background thread."""
+    def stop_prefetch(self) -> None:
+        """End of a render: keep the tiles prefetched and finished (in the bake), drop the rest, stop the thread.
+
+        Does not wait for a tile still being synthesised (the next block that
+        would have needed it will not come); the next render starts afresh.
+        """
         ex = getattr(self, "_executor", None)
         if ex is not None:
-            ex.shutdown(wait=True, cancel_futures=True)
+            for k, fut in self._pending.items():
+                if fut.done() and fut.exception() is None:
+                    self.tile_store.put(self._bake_key(k), fut.result()[0])
+            ex.shutdown(wait=False, cancel_futures=True)
             self._executor = None
+        if hasattr(self, "_pending"):
             self._pending = {}
+            self._last_k0 = None
 
     def ray_intersect_ceiling(self, det, t_lines: np.ndarray, *, repeats: int = 3) -> float:
         """Raw ``scene.ray_intersect`` throughput [rays/s] on this block's rays (prepared beforehand)."""

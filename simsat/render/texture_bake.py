@@ -43,8 +43,6 @@ class TileStore:
         self._items: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
         self._bytes = 0
         self._lock = threading.Lock()
-        self.hits = 0
-        self.misses = 0
 
     @property
     def nbytes(self) -> int:
@@ -55,16 +53,13 @@ class TileStore:
         return len(self._items)
 
     def get(self, key):
-        """The array stored under ``key``, or None (counted as a hit or a miss)."""
+        """The array stored under ``key``, or None."""
         if key is None:
             return None
         with self._lock:
             arr = self._items.get(key)
-            if arr is None:
-                self.misses += 1
-                return None
-            self._items.move_to_end(key)
-            self.hits += 1
+            if arr is not None:
+                self._items.move_to_end(key)
             return arr
 
     def put(self, key, arr: np.ndarray) -> None:
@@ -83,11 +78,10 @@ class TileStore:
                 self._bytes -= dropped.nbytes
 
     def clear(self) -> None:
-        """Drop everything (and reset the counters)."""
+        """Drop everything."""
         with self._lock:
             self._items.clear()
             self._bytes = 0
-            self.hits = self.misses = 0
 
 
 #: Bound of the store where :func:`enable_bake` turns it on [MiB].
@@ -123,7 +117,7 @@ def array_fingerprint(a) -> str:
     a = np.ascontiguousarray(a)
     h = hashlib.sha256()
     h.update(str((a.dtype.str, a.shape)).encode())
-    h.update(a.tobytes())
+    h.update(memoryview(a).cast("B"))    # the buffer itself, not a copy
     return h.hexdigest()
 
 
