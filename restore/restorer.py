@@ -247,22 +247,19 @@ class Restorer:
         Returns (pairs, records, estimate) of the last pass.
         """
         s = self.settings
-        passes = stages.rematch_passes(s.rematch, estimate, s.axes, product.pixel_ifov_rad)
-        auto = s.rematch == "auto"
+        first = stages.rematch_passes(s.rematch, estimate, s.axes, product.pixel_ifov_rad)
         t = _time.perf_counter()
-        k = 0
-        while k < passes:
+        passes = 0
+        for k in range(first if s.rematch != "auto" or not first else stages.MAX_AUTO_REMATCH):
             bar.note(f"rematch {k + 1}: matching again in B resampled with the estimate "
                      f"(worst pair {stages.valid_fraction(pairs) * 100:.0f} % valid)")
             attitude = {a: knowledge[a] + np.nan_to_num(estimate[a]) for a in AXES}
             pairs = stages.rematch_pairs(product, pairs, attitude, s)
             before = estimate
             pairs, records, estimate = self.synthesise_and_integrate(product, pairs, knowledge, {}, bar)
-            k += 1
-            if auto and k == passes and k < stages.MAX_AUTO_REMATCH and \
-                    stages.estimate_change_px(before, estimate, s.axes, product.pixel_ifov_rad) > \
-                    stages.REMATCH_CONVERGED_PX:
-                passes += 1  # the estimate still moved: B resampled with it is closer to A again
+            passes += 1
+            if s.rematch == "auto" and not stages.rematch_moved(before, estimate, s.axes, product.pixel_ifov_rad):
+                break  # converged: B resampled with the estimate would not be any closer to A
         if passes:
             timings["rematch_s"] = _time.perf_counter() - t
             timings["rematch_passes"] = passes

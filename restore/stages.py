@@ -37,7 +37,7 @@ from .synthesis import (
 )
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
-           "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
+           "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
            "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
@@ -266,13 +266,8 @@ REMATCH_RATE_PX_PER_LINE = 0.3
 
 def line_rate_px(estimate: dict, axes, pixel_ifov_rad: float) -> float:
     """RMS change of the estimate from one line to the next, worst restored axis [px per line]."""
-    out = 0.0
-    for a in axes:
-        d = np.diff(np.asarray(estimate[a], dtype=np.float64))
-        d = d[np.isfinite(d)]
-        if d.size:
-            out = max(out, float(np.sqrt(np.mean(d ** 2))) / pixel_ifov_rad)
-    return out
+    steps = {a: np.diff(np.asarray(estimate[a], dtype=np.float64)) for a in axes}
+    return _worst_axis_rms_px(steps, axes, pixel_ifov_rad, centre=False)
 
 
 #: "auto" rematch: another pass while the estimate moves by more than this between passes (RMS, worst axis) [px]
@@ -281,15 +276,26 @@ REMATCH_CONVERGED_PX = 0.01
 MAX_AUTO_REMATCH = 2
 
 
-def estimate_change_px(before: dict, after: dict, axes, pixel_ifov_rad: float) -> float:
-    """RMS change between two estimates over the lines both restore, worst axis [px] (means removed)."""
+def _worst_axis_rms_px(series: dict, axes, pixel_ifov_rad: float, *, centre: bool) -> float:
+    """RMS over the finite samples, worst of ``axes`` [px] (``centre``: mean removed first)."""
     out = 0.0
     for a in axes:
-        d = np.asarray(after[a], dtype=np.float64) - np.asarray(before[a], dtype=np.float64)
+        d = np.asarray(series[a], dtype=np.float64)
         d = d[np.isfinite(d)]
         if d.size:
-            out = max(out, float(np.sqrt(np.mean((d - d.mean()) ** 2))) / pixel_ifov_rad)
+            out = max(out, float(np.sqrt(np.mean((d - d.mean() if centre else d) ** 2))) / pixel_ifov_rad)
     return out
+
+
+def estimate_change_px(before: dict, after: dict, axes, pixel_ifov_rad: float) -> float:
+    """RMS change between two estimates over the lines both restore, worst axis [px] (means removed)."""
+    diff = {a: np.asarray(after[a], dtype=np.float64) - np.asarray(before[a], dtype=np.float64) for a in axes}
+    return _worst_axis_rms_px(diff, axes, pixel_ifov_rad, centre=True)
+
+
+def rematch_moved(before: dict, after: dict, axes, pixel_ifov_rad: float) -> bool:
+    """Whether a rematch pass still moved the estimate by more than :data:`REMATCH_CONVERGED_PX` ("auto")."""
+    return estimate_change_px(before, after, axes, pixel_ifov_rad) > REMATCH_CONVERGED_PX
 
 
 def rematch_passes(setting, estimate: dict, axes, pixel_ifov_rad: float) -> int:
