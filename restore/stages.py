@@ -13,7 +13,6 @@ import numpy as np
 from simsat.attitude import AttitudeSeries
 from simsat.config import ScenarioError
 from simsat.product import Product, clamped_attitude
-from simsat.units import RAD_PER_URAD
 
 from .axis_integration import integrate_axis
 from .correction import correct_bands, line_median, misregistration, rank_within_line, weak_band_misregistration
@@ -484,10 +483,10 @@ def knowledge_crossover_hz(records: dict, sigma: dict, product: Product, highpas
     underestimates the low-frequency noise 3-4× and would put the crossover
     too low.
     """
-    attrs = product.ds.attrs
-    if "knowledge_noise_urad" not in attrs or "knowledge_rate_hz" not in attrs:
+    spec = product.knowledge_noise
+    if spec is None:
         return None
-    e_k = (float(attrs["knowledge_noise_urad"]) * RAD_PER_URAD) ** 2 / float(attrs["knowledge_rate_hz"])
+    e_k = spec[0] ** 2 / spec[1]
     if e_k <= 0:
         return None
     out = None
@@ -519,13 +518,13 @@ def knowledge_ceilings(product: Product, knowledge: dict, settings: RestorationS
     knowledge's filter (cut-off, order, rate, noise).
     """
     attrs = product.ds.attrs
-    if not settings.knowledge_prior or "knowledge_cutoff_hz" not in attrs or "knowledge_filter_order" not in attrs:
+    if not settings.knowledge_prior or "knowledge_cutoff_hz" not in attrs or "knowledge_filter_order" not in attrs \
+            or product.knowledge_noise is None:
         return {}
     dt = product.instrument.line_period_s
+    noise_rad, rate_hz = product.knowledge_noise
     return {a: knowledge_psd_ceiling(knowledge[a], dt, cutoff_hz=float(attrs["knowledge_cutoff_hz"]),
-                                     order=int(attrs["knowledge_filter_order"]),
-                                     rate_hz=float(attrs["knowledge_rate_hz"]),
-                                     noise_rad=float(attrs["knowledge_noise_urad"]) * RAD_PER_URAD,
+                                     order=int(attrs["knowledge_filter_order"]), rate_hz=rate_hz, noise_rad=noise_rad,
                                      kind=str(attrs.get("knowledge_filter", "butterworth_zero_phase")))
             for a in settings.axes}
 
@@ -598,9 +597,7 @@ def predicted_sigma(records: dict, product: Product, settings: RestorationSettin
     """
     if settings.posterior_samples < 2:
         return {}
-    attrs = product.ds.attrs
-    noise = float(attrs.get("knowledge_noise_urad", 0.0)) * RAD_PER_URAD
-    rate = float(attrs["knowledge_rate_hz"]) if "knowledge_rate_hz" in attrs else None
+    noise, rate = product.knowledge_noise or (0.0, None)
     return {a: posterior_sigma(rec, samples=settings.posterior_samples, seed=k, knowledge_noise_rad=noise,
                                knowledge_rate_hz=rate)
             for k, (a, rec) in enumerate(sorted(records.items()))}

@@ -178,6 +178,15 @@ class Product:
         return np.asarray(self.ds["time"].values, dtype=np.float64)
 
     @property
+    def knowledge_noise(self) -> tuple[float, float] | None:
+        """The AOCS knowledge's white noise per sample [rad] and its rate [Hz] as the product records them
+        (``knowledge_noise_urad``, ``knowledge_rate_hz``); None when it does not."""
+        a = self.ds.attrs
+        if "knowledge_noise_urad" not in a or "knowledge_rate_hz" not in a:
+            return None
+        return float(a["knowledge_noise_urad"]) * 1e-6, float(a["knowledge_rate_hz"])
+
+    @property
     def star_tracker_noise_rad(self) -> float | None:
         """The star tracker's white noise per sample [rad] as the product records it (None: not recorded)."""
         v = self.ds.attrs.get("star_tracker_noise_urad") if self.star_tracker is not None else None

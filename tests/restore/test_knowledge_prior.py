@@ -178,7 +178,7 @@ def test_knowledge_crossover_follows_the_formula_and_the_knowledge_noise():
     ps = PosteriorSigma(sigma=np.zeros(n), noise_scale=1.0, samples=8, noise_colour=colour)
 
     def product(noise_urad, rate=64.0):
-        return SimpleNamespace(ds=SimpleNamespace(attrs={"knowledge_noise_urad": noise_urad, "knowledge_rate_hz": rate}))
+        return SimpleNamespace(knowledge_noise=(noise_urad * 1e-6, rate))
 
     e_k = (0.3e-6) ** 2 / 64.0
     n_j = noise_std ** 2 * dt * 4.0
@@ -191,4 +191,4 @@ def test_knowledge_crossover_follows_the_formula_and_the_knowledge_noise():
     assert knowledge_crossover_hz({"roll": rec}, {"roll": ps}, product(0.3), 100.0) == pytest.approx(expect / 2)
     no_colour = PosteriorSigma(sigma=np.zeros(n), noise_scale=1.0, samples=8)
     assert knowledge_crossover_hz({"roll": rec}, {"roll": no_colour}, product(0.3), 2.0) is None
-    assert knowledge_crossover_hz({"roll": rec}, {"roll": ps}, SimpleNamespace(ds=SimpleNamespace(attrs={})), 2.0) is None
+    assert knowledge_crossover_hz({"roll": rec}, {"roll": ps}, SimpleNamespace(knowledge_noise=None), 2.0) is None
