@@ -11,7 +11,12 @@ Steps:
 1. time synchronisation — band B sees line ``l`` of A at ``t + τ + λ(l)``, not
    ``t + τ``; a method that models per-line lags gets them, any other gets
    differentials brought back to the nominal lag with a lag-aware estimate
-   θ̂ (``lsq``): ``D_j − [θ̂(t + τ_j + λ_j) − θ̂(t + τ_j)]``;
+   θ̂ (``lsq``): ``D_j − [θ̂(t + τ_j + λ_j) − θ̂(t + τ_j)]``. A method that
+   models the lags once its prior is known (``prior_lags``: the MAP Wiener)
+   estimates its prior on those corrected differentials, then runs again on
+   the measured ones with the lags in its forward model: the correction's
+   error (the first fit's error times the lag, large where the attitude
+   moves a pixel per line and the lags reach several lines) is gone;
 2. the method itself, with the per-line data it takes (weights, lags,
    sigmas: see :mod:`restore.integration.methods`);
 3. high-pass of the estimate at ``highpass_hz`` (the AOCS knows the low
@@ -140,11 +145,13 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
     diffs = [np.asarray(d, dtype=np.float64) for d in diffs]
     taus = [float(t) for t in taus]
     timed = lags is not None and any(np.any(np.asarray(lg) != 0) for lg in lags)
-    if timed and not spec.line_lags:
+    exact_lags = timed and spec.prior_lags
+    measured = diffs
+    if timed and not spec.line_lags and not (exact_lags and "psd" in opts):
         lsq = integration_method("lsq")
         first = lsq.function(diffs, taus, dt, **lsq.data_options(lags=lags, sigmas=sigmas), gcv=first_stage_gcv)
         diffs = lag_corrected_differentials(diffs, taus, dt, lags, first)
-    data = spec.data_options(weights=weights, lags=lags, sigmas=sigmas,
+    data = spec.data_options(weights=weights, lags=lags if spec.line_lags else None, sigmas=sigmas,
                              psd_ceiling=None if "psd" in opts else psd_ceiling)
     prior = None
     if spec.reports_spectrum and "psd" not in opts:
@@ -154,6 +161,11 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
                               np.asarray(res.spectrum.psd, dtype=np.float64),
                               np.broadcast_to(np.asarray(res.spectrum.noise_std, dtype=np.float64),
                                               (len(taus),)).copy())
+        if exact_lags:
+            fixed = spec.frozen_options(opts, prior)
+            theta = integrate(measured, taus, dt, method=spec.name, **fixed, **data, lags=lags)
+    elif exact_lags:
+        theta = integrate(measured, taus, dt, method=spec.name, **opts, **data, lags=lags)
     else:
         theta = integrate(diffs, taus, dt, method=spec.name, **opts, **data)
     theta = np.asarray(theta, dtype=np.float64)

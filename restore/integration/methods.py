@@ -8,6 +8,11 @@ Callers never branch on a method's name: they ask its spec what it can do.
   (time synchronisation) itself; other methods assume constant lags and get
   differentials brought back to the nominal lag first
   (:func:`restore.axis_integration.integrate_axis`);
+* ``prior_lags`` — takes ``lags=`` and models them exactly once its prior is
+  given (``psd=``, ``noise_std=``): the prior is estimated on differentials
+  brought back to the nominal lag, then the method runs again on the
+  differentials as measured, lags modelled (a prior estimated from lagged
+  differentials is wrong by the lags' modulation at large amplitude);
 * ``line_sigmas`` — takes ``sigmas=`` (per-line formal σ of the differentials);
 * ``reports_spectrum`` — adapts its prior to the data and, with
   ``return_details=True``, reports the PSD prior and noise levels it used
@@ -51,6 +56,7 @@ class IntegrationMethod:
     implementation: Callable | None = None
     line_weights: bool = False
     line_lags: bool = False
+    prior_lags: bool = False
     line_sigmas: bool = False
     reports_spectrum: bool = False
     psd_ceiling: bool = False
@@ -76,7 +82,7 @@ class IntegrationMethod:
             out["psd_ceiling"] = psd_ceiling
         if self.line_weights and weights is not None:
             out["weights"] = weights
-        if self.line_lags and lags is not None:
+        if (self.line_lags or self.prior_lags) and lags is not None:
             out["lags"] = lags
         if self.line_sigmas and sigmas is not None:
             out["sigmas"] = sigmas
@@ -98,7 +104,7 @@ def _spec(name, module, function_name, principle, **caps) -> IntegrationMethod:
 INTEGRATION_METHODS: dict[str, IntegrationMethod] = {s.name: s for s in (
     _spec("wiener", "wiener", "integrate_wiener",
           "exact multi-pair Wiener / MAP on the finite record, data-estimated PSD prior, CG",
-          line_weights=True, reports_spectrum=True, psd_ceiling=True),
+          line_weights=True, reports_spectrum=True, psd_ceiling=True, prior_lags=True),
     _spec("wiener_fft", "wiener", "integrate_wiener_fft", "one-shot multi-pair Wiener filter (FFT)"),
     _spec("inverse", "wiener", "integrate_inverse", "pseudo-inverse conj(G) / (|G|² + k)", gain_option="k"),
     _spec("local", "local", "integrate_local", "CNES local integration w = R⁻¹ r"),

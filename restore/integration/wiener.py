@@ -48,6 +48,27 @@ def _default_max_gap(taus: np.ndarray, dt: float, max_gap_s) -> int:
     return int(round(check_positive("max_gap_s", max_gap_s, allow_zero=True) / dt))
 
 
+def lag_interpolation(lag_samples, m: int):
+    """Sparse (n × m) operator ``x ↦ x(k + λ_k)`` on a periodic grid of ``m`` samples (4-point Lagrange).
+
+    ``lag_samples`` (n,) are the extra lags in samples (finite). Its transpose
+    is the adjoint the MAP normal equations need.
+    """
+    from scipy.sparse import csr_matrix
+
+    lam = np.asarray(lag_samples, dtype=np.float64)
+    n = lam.size
+    pos = np.arange(n) + lam
+    base = np.floor(pos)
+    x = pos - base
+    # Lagrange weights at nodes -1, 0, 1, 2 for position x in [0, 1)
+    w = np.stack([-x * (x - 1) * (x - 2) / 6, (x + 1) * (x - 1) * (x - 2) / 2,
+                  -(x + 1) * x * (x - 2) / 2, (x + 1) * x * (x - 1) / 6], axis=1)
+    cols = (base.astype(np.int64)[:, None] + np.arange(-1, 3)[None, :]) % m
+    rows = np.repeat(np.arange(n), 4)
+    return csr_matrix((w.ravel(), (rows, cols.ravel())), shape=(n, m))
+
+
 def _finish(theta: np.ndarray, valid, taus, dt, max_gap_s) -> np.ndarray:
     mask = estimable_mask(valid, taus, dt, max_gap=_default_max_gap(taus, dt, max_gap_s))
     out = np.where(mask, theta, np.nan)
@@ -176,12 +197,16 @@ class WienerResult:
         self.residual = residual
 
 
-def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=None, rel_weights=None):
+def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=None, rel_weights=None,
+              lag_ops=None):
     """Solve the MAP normal equations on the periodic grid of length ``m``.
 
     ``theta0`` (length ``m``, optional) warm-starts the iteration;
     ``rel_weights`` (pair, sample), optional, scales each sample's inverse
-    noise variance ``1 / sigma_j²`` (mean 1 over the valid samples).
+    noise variance ``1 / sigma_j²`` (mean 1 over the valid samples);
+    ``lag_ops`` (one :func:`lag_interpolation` per pair, optional) makes the
+    forward model ``θ(t + τ_j + λ_j(t)) − θ(t)`` exactly (time synchronisation
+    inside the MAP instead of a correction of the data).
     Returns (theta on the record, theta on the grid, predicted differentials,
     iterations, residual).
     """
@@ -192,12 +217,30 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
     if rel_weights is not None:
         w = w * rel_weights
     dz = np.where(valid, D, 0.0)
+    if lag_ops is None:
+        def forward(z: np.ndarray) -> np.ndarray:
+            return irfft(kop * rfft(z)[None, :], n=m, axis=-1)[:, :n]
+
+        def adjoint(r: np.ndarray) -> np.ndarray:
+            return irfft((np.conj(kop) * rfft(r, n=m, axis=-1)).sum(0), n=m)
+    else:
+        shift = np.exp(2j * np.pi * freq[None, :] * taus[:, None])
+
+        def forward(z: np.ndarray) -> np.ndarray:
+            th = c * rfft(z)
+            ahead = irfft(shift * th[None, :], n=m, axis=-1)
+            now = irfft(th, n=m)[:n]
+            return np.stack([lag_ops[j] @ ahead[j] for j in range(p)]) - now[None, :]
+
+        def adjoint(r: np.ndarray) -> np.ndarray:
+            back = np.stack([lag_ops[j].T @ r[j] for j in range(p)])
+            acc = (np.conj(shift) * rfft(back, n=m, axis=-1)).sum(0) - rfft(r.sum(0), n=m)
+            return irfft(c * acc, n=m)
 
     def normal(z: np.ndarray) -> np.ndarray:
-        r = irfft(kop * rfft(z)[None, :], n=m, axis=-1)[:, :n] * w
-        return z + irfft((np.conj(kop) * rfft(r, n=m, axis=-1)).sum(0), n=m)
+        return z + adjoint(forward(z) * w)
 
-    b = irfft((np.conj(kop) * rfft(dz * w, n=m, axis=-1)).sum(0), n=m)
+    b = adjoint(dz * w)
     frac = valid.sum(1) / m
     diag = 1.0 + (np.abs(kop) ** 2 * (frac / sigma**2)[:, None]).sum(0)
 
@@ -228,16 +271,14 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
         ry_new = float(np.sum(r * y))
         d = y + (ry_new / ry) * d
         ry = ry_new
-    zf = rfft(z)
-    grid = irfft(c * zf, n=m)
-    pred = irfft(kop * zf[None, :], n=m, axis=-1)[:, :n]
-    return grid[:n], grid, pred, it, res
+    grid = irfft(c * rfft(z), n=m)
+    return grid[:n], grid, forward(z), it, res
 
 
 def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction: float = 0.5,
                      tol: float = 1e-7, maxiter: int = 300, refine: int | None = None,
                      max_gap_s: float | None = None, spectrum_options: dict | None = None,
-                     weights=None, psd_ceiling=None, return_details: bool = False):
+                     weights=None, psd_ceiling=None, lags=None, return_details: bool = False):
     """Exact multi-pair Wiener (MAP) integration on the finite record, by conjugate gradients.
 
     With gaps, the first PSD estimate comes from the gap-free segments only
@@ -276,6 +317,13 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         what the AOCS knowledge already knows
         (:func:`restore.knowledge_prior.knowledge_psd_ceiling`); ignored when
         ``psd`` is given. The reported spectrum is the bounded one.
+    lags : sequence of arrays, keyword-only
+        Extra lag of each pair at each sample [s] (time synchronisation:
+        ``diffs[j][n] ≈ θ(n dt + τ_j + λ_j[n]) − θ(n dt)``), modelled exactly in
+        the normal equations (4-point interpolation of the shifted estimate,
+        :func:`lag_interpolation`); non-finite = 0. The prior, when estimated,
+        is estimated from the differentials as given (a lag of a few samples
+        barely moves a PSD smoothed over many bins).
     return_details : bool, keyword-only
         Return a :class:`WienerResult` instead of the array.
 
@@ -305,6 +353,13 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
     if int(refine) < 0:
         raise ValueError(f"refine: must be >= 0, got {refine}")
     m = _grid(n, taus, dt, check_positive("pad_fraction", pad_fraction, allow_zero=True))
+    lag_ops = None
+    if lags is not None:
+        lag_arr = [np.nan_to_num(np.asarray(x, dtype=np.float64)) for x in lags]
+        if len(lag_arr) != p or any(x.shape != (n,) for x in lag_arr):
+            raise ValueError(f"lags: expected {p} arrays of {n} samples, got {[x.shape for x in lag_arr]}")
+        if any(np.any(x != 0) for x in lag_arr):
+            lag_ops = [lag_interpolation(x / dt, m) for x in lag_arr]
     opts = dict(spectrum_options or {})
     spec: SpectralEstimate = estimate_spectrum(D, taus, dt, n_fft=m, noise_std=noise_std, **opts)
     passes = 0 if psd is not None else int(refine)
@@ -318,7 +373,8 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         if m % 2 == 0:
             S[-1] = 0.0  # keep the operator exactly self-adjoint on real signals
         full, grid, pred, it, res = _cg_solve(D, valid, taus, dt, spec.freq, S, spec.noise_std,
-                                              m, tol=tol, maxiter=maxiter, theta0=grid, rel_weights=rel)
+                                              m, tol=tol, maxiter=maxiter, theta0=grid, rel_weights=rel,
+                                              lag_ops=lag_ops)
         if k == passes:
             break
         sigma = noise_std

@@ -248,10 +248,13 @@ def test_resampling_grid_interpolated_between_exact_columns(tiny_restored):
     assert np.nanmax(np.abs(exact[1] - cols[None, :])) > 0.1
 
 
-@pytest.mark.parametrize("boost_px", [0.0, 6.0])
+@pytest.mark.parametrize("boost_px", [0.0, 4.0])
 def test_linearised_resampling_grid_equals_the_sensor_model(tiny_restored, boost_px):
     """The first-order grid (default) against the exact sensor-model grid: the restored attitude, and the
-    same plus a 6 px, 80 Hz line on roll and pitch and 20 µrad of yaw (the Newton solve of the implicit time)."""
+    same plus a 4 px, 80 Hz line on roll and pitch and 20 µrad of yaw (the Newton solve of the implicit time).
+
+    The line of sight must not move along track faster than the scan (a pixel per line): beyond, the band
+    folds over itself, a ground point is seen on several lines and the two grids may pick different ones."""
     from restore.correction import resampling_grid
     from simsat.attitude import AttitudeSeries
     from simsat.product import read_product
@@ -268,10 +271,11 @@ def test_linearised_resampling_grid_equals_the_sensor_model(tiny_restored, boost
     vals["yaw"] = vals["yaw"] + (20e-6 if boost_px else 0.0) * np.cos(2 * np.pi * 30.0 * t)
     series = AttitudeSeries(time=t, **vals)
     lines = slice(40, 340)
+    assert np.abs(np.diff(vals["pitch"][lines])).max() / ifov < 0.95  # no fold-over (see above)
     exact = resampling_grid(product, "B2", series, column_step=32, lines=lines, exact=True)
     fast = resampling_grid(product, "B2", series, column_step=32, lines=lines)
     moved = np.nanmax(np.abs(exact[0] - np.arange(40, 340)[:, None]))
-    assert moved > (3.0 if boost_px else 0.1)  # the mapping really moves the pixels
+    assert moved > (2.0 if boost_px else 0.1)  # the mapping really moves the pixels
     for e, f in zip(exact, fast):
         assert np.array_equal(np.isnan(e), np.isnan(f))
         assert np.nanmax(np.abs(e - f)) < (2e-3 if boost_px else 5e-4)
