@@ -210,11 +210,12 @@ def _formal_sigma(x, inl, lines, rows_l, rows_c, w, sig_l, sig_c, n_lines: int) 
     return cov_diag
 
 
-def highpass_nan(signal: np.ndarray, *, dt: float, cutoff_hz: float) -> np.ndarray:
+def highpass_nan(signal: np.ndarray, *, dt: float, cutoff_hz: float, mode: str = "constant") -> np.ndarray:
     """Remove frequencies below ``cutoff_hz`` from a gappy signal (NaN kept as NaN).
 
     Subtracts a NaN-aware Gaussian-smoothed copy (normalised convolution) whose
-    −3 dB point is at ``cutoff_hz``; beyond the ends is treated as missing.
+    −3 dB point is at ``cutoff_hz``; beyond the ends is treated as missing
+    (``mode="constant"``), or the signal is periodic (``mode="wrap"``).
     """
     from scipy.ndimage import gaussian_filter1d
 
@@ -228,8 +229,10 @@ def highpass_nan(signal: np.ndarray, *, dt: float, cutoff_hz: float) -> np.ndarr
     sigma = np.sqrt(np.log(2.0)) / (2 * np.pi * cutoff_hz) / dt
     # outside the record is missing data, like a gap (normalised convolution): padding with
     # the edge sample would put its jitter into the low-pass estimate near the ends
-    num = gaussian_filter1d(np.where(m, x, 0.0), sigma, mode="constant", cval=0.0)
-    den = gaussian_filter1d(m.astype(np.float64), sigma, mode="constant", cval=0.0)
+    if mode not in ("constant", "wrap"):
+        raise ValueError(f"mode: 'constant' or 'wrap', got {mode!r}")
+    num = gaussian_filter1d(np.where(m, x, 0.0), sigma, mode=mode, cval=0.0)
+    den = gaussian_filter1d(m.astype(np.float64), sigma, mode=mode, cval=0.0)
     low = num / np.maximum(den, 1e-12)
     out = x - low
     out[~m] = np.nan

@@ -181,6 +181,10 @@ class WienerResult:
         Estimate (rad), NaN where not estimated.
     theta_full : ndarray
         Posterior mean at every sample (also inside long gaps).
+    theta_grid : ndarray or None
+        Posterior mean on the whole periodic grid the MAP is solved on (the
+        record, then its padding back to the start), mean removed as
+        ``theta_full``: a filter applied there never meets an end of record.
     spectrum : SpectralEstimate
         PSD and noise levels used.
     iterations : int
@@ -189,9 +193,10 @@ class WienerResult:
         Final relative residual of the normal equations.
     """
 
-    def __init__(self, theta, theta_full, spectrum, iterations, residual):
+    def __init__(self, theta, theta_full, spectrum, iterations, residual, theta_grid=None):
         self.theta = theta
         self.theta_full = theta_full
+        self.theta_grid = theta_grid
         self.spectrum = spectrum
         self.iterations = iterations
         self.residual = residual
@@ -385,7 +390,7 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         spec = estimate_spectrum(filled, taus, dt, n_fft=m, noise_std=sigma, **opts)
     theta = _finish(full, valid, taus, dt, max_gap_s)
     if return_details:
-        return WienerResult(theta, full - np.mean(full), spec, it, res)
+        return WienerResult(theta, full - np.mean(full), spec, it, res, theta_grid=grid - np.mean(full))
     return theta
 
 
