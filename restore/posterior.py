@@ -105,13 +105,23 @@ def noise_per_line(record) -> np.ndarray:
     return np.where(valid, sig, np.nan)
 
 
-def prior_draw(freq: np.ndarray, psd: np.ndarray, n: int, dt: float, rng: np.random.Generator) -> np.ndarray:
-    """One draw of a stationary Gaussian signal of two-sided PSD ``psd`` on ``freq`` [rad²/Hz], ``n`` samples."""
+def prior_draw(freq: np.ndarray, psd: np.ndarray, n: int, dt: float, rng: np.random.Generator, *,
+               highpass_hz: float = 0.0) -> np.ndarray | tuple:
+    """One draw of a stationary Gaussian signal of two-sided PSD ``psd`` on ``freq`` [rad²/Hz], ``n`` samples.
+
+    With ``highpass_hz > 0``, returns ``(draw, high_passed)``: the same draw and its
+    high-pass (gain ``1 − 2^(−(f/f_c)²/2)``, the restoration's) computed on the
+    whole periodic signal it is cut from — what the images are meant to supply,
+    with no end of record in the filter.
+    """
     m = next_fast_len(2 * n)
     f = np.fft.rfftfreq(m, dt)
     s = np.interp(f, freq, psd, left=0.0, right=0.0)
-    w = rng.standard_normal(m)
-    return irfft(rfft(w) * np.sqrt(s / dt), n=m)[:n]
+    spec = rfft(rng.standard_normal(m)) * np.sqrt(s / dt)
+    draw = irfft(spec, n=m)[:n]
+    if highpass_hz <= 0:
+        return draw
+    return draw, irfft(spec * (1.0 - 2.0 ** (-0.5 * (f / highpass_hz) ** 2)), n=m)[:n]
 
 
 def simulated_differentials(theta: np.ndarray, taus, lags, valid: np.ndarray, dt: float) -> np.ndarray:
@@ -282,10 +292,14 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     def run(colour, k: int, check: bool):
         errs, resid = [], []
         for _ in range(k):
-            th = prior_draw(freq, psd, ext, dt, rng)
+            if record.highpass_hz > 0:
+                th, ref = prior_draw(freq, psd, ext, dt, rng, highpass_hz=record.highpass_hz)
+                ref = ref[:n]
+            else:
+                th = prior_draw(freq, psd, ext, dt, rng)
+                ref = th[:n]
             ds = simulated_differentials(th, taus, lags, valid, dt) + coloured_noise(noise, colour, rng)
             est = record.rerun(ds, first_stage_gcv=False)
-            ref = highpass_nan(th[:n], dt=dt, cutoff_hz=record.highpass_hz) if record.highpass_hz > 0 else th[:n]
             e = est - ref
             if knowledge_noise_rad > 0 and knowledge_rate_hz:
                 e = e + knowledge_noise_below(n, dt, record.highpass_hz, knowledge_noise_rad, knowledge_rate_hz, rng)

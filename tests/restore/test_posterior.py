@@ -179,3 +179,26 @@ def test_noise_rising_in_a_band_is_caught_band_by_band():
     assert actual == pytest.approx(predicted, rel=0.2)
     assert np.sqrt(np.nanmean(white.sigma ** 2)) < 0.8 * actual      # the white model alone is optimistic
     assert ps.noise_scale > 1.0                                        # (an RMS over all frequencies)
+
+
+def test_prior_draw_high_pass_is_the_whole_signals():
+    """The Monte Carlo's reference: the draw's high-pass on the periodic signal it is cut from — the same as
+    the record-only high-pass in the interior, and free of its end effects."""
+    from restore.posterior import prior_draw
+    from restore.synthesis import highpass_nan
+
+    dt, n = 4e-4, 4000
+    freq = np.linspace(0, 1250, 5001)
+    psd = np.where((freq > 2.5) & (freq < 9.0), 1e-12, 0.0)           # 3–8 Hz lines' band
+    rng = np.random.default_rng(3)
+    draw, hp = prior_draw(freq, psd, n, dt, rng, highpass_hz=0.4)
+    assert draw.shape == hp.shape == (n,)
+    np.testing.assert_allclose(hp - np.mean(hp), draw - np.mean(draw), atol=2e-3 * np.std(draw))   # nothing below 0.4 Hz
+    record_only = highpass_nan(draw, dt=dt, cutoff_hz=0.4)
+    mid = slice(1500, 2500)
+    np.testing.assert_allclose(record_only[mid] - hp[mid], np.mean(record_only[mid] - hp[mid]),
+                               atol=0.02 * np.std(draw))
+    ends = np.r_[0:100, n - 100:n]
+    assert np.std((record_only - hp)[ends]) > 5 * np.std((record_only - hp)[mid])
+    # without a high-pass: the draw alone, as before
+    assert isinstance(prior_draw(freq, psd, n, dt, np.random.default_rng(3)), np.ndarray)
