@@ -117,6 +117,11 @@ def periodic_highpass(theta: np.ndarray, grid: np.ndarray, *, dt: float, cutoff_
     """
     th = np.asarray(theta, dtype=np.float64)
     ext = np.asarray(grid, dtype=np.float64).copy()
+    ok = np.isfinite(th)
+    if ok.any():
+        # the record's mean was removed over its estimable samples only: bring the padding to the same level,
+        # or the joins would be steps that the wrapped low-pass spreads back into the record's ends
+        ext += float(np.mean(th[ok] - ext[:th.size][ok]))
     ext[:th.size] = th                        # gaps of the record stay missing, as highpass_nan has them
     hp = highpass_nan(ext, dt=dt, cutoff_hz=cutoff_hz, mode="wrap")[:th.size]
     if np.isfinite(hp).any():

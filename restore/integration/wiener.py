@@ -37,8 +37,8 @@ from .spectrum import SpectralEstimate, estimate_spectrum
 __all__ = ["integrate_inverse", "integrate_wiener_fft", "integrate_wiener", "WienerResult", "spectrum_for_lines"]
 
 
-def _grid(n: int, taus: np.ndarray, dt: float, pad_fraction: float) -> int:
-    ext = int(math.ceil(taus.max() / dt)) + 4
+def _grid(n: int, taus: np.ndarray, dt: float, pad_fraction: float, max_lag_s: float = 0.0) -> int:
+    ext = int(math.ceil((taus.max() + max_lag_s) / dt)) + 4
     return next_fast_len(int(n * (1 + pad_fraction)) + ext)
 
 
@@ -357,14 +357,18 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         refine = 2 if valid.mean() < 0.99 else 0
     if int(refine) < 0:
         raise ValueError(f"refine: must be >= 0, got {refine}")
-    m = _grid(n, taus, dt, check_positive("pad_fraction", pad_fraction, allow_zero=True))
-    lag_ops = None
+    lag_arr = None
     if lags is not None:
         lag_arr = [np.nan_to_num(np.asarray(x, dtype=np.float64)) for x in lags]
         if len(lag_arr) != p or any(x.shape != (n,) for x in lag_arr):
             raise ValueError(f"lags: expected {p} arrays of {n} samples, got {[x.shape for x in lag_arr]}")
-        if any(np.any(x != 0) for x in lag_arr):
-            lag_ops = [lag_interpolation(x / dt, m) for x in lag_arr]
+        if not any(np.any(x != 0) for x in lag_arr):
+            lag_arr = None
+    # the padding also holds the longest extra lag (+2 for the interpolation's support): a lagged sample
+    # must not wrap around to the record's start
+    max_lag = 0.0 if lag_arr is None else max(float(np.max(np.abs(x))) for x in lag_arr) + 2 * dt
+    m = _grid(n, taus, dt, check_positive("pad_fraction", pad_fraction, allow_zero=True), max_lag)
+    lag_ops = None if lag_arr is None else [lag_interpolation(x / dt, m) for x in lag_arr]
     opts = dict(spectrum_options or {})
     spec: SpectralEstimate = estimate_spectrum(D, taus, dt, n_fft=m, noise_std=noise_std, **opts)
     passes = 0 if psd is not None else int(refine)

@@ -84,3 +84,19 @@ def test_periodic_highpass_does_not_leak_the_estimates_oscillations_at_the_recor
 
     assert err(truncated) > 0.03
     assert err(wrapped) < 0.1 * err(truncated)
+
+
+def test_periodic_highpass_brings_the_padding_to_the_records_level():
+    """The record's mean is removed over its estimable samples, the grid's over all of them: with a long gap
+    the two levels differ, and the joins must not become steps the wrapped low-pass spreads into the ends."""
+    from restore.axis_integration import periodic_highpass
+
+    dt, n, m = 4e-4, 3000, 4500
+    k = np.arange(m)
+    grid = np.sin(2 * np.pi * 12 * k / m)
+    theta = grid[:n].copy()
+    theta[1000:1700] = np.nan
+    shifted = theta - np.nanmean(theta)                       # as the MAP's _finish leaves it
+    a = periodic_highpass(shifted, grid, dt=dt, cutoff_hz=0.4)
+    b = periodic_highpass(shifted, grid - np.nanmean(theta), dt=dt, cutoff_hz=0.4)
+    np.testing.assert_allclose(a, b, atol=1e-12, equal_nan=True)
