@@ -305,6 +305,13 @@ def draw_uncertainty(axs, d: dict, axis: str, *, ifov_rad: float):
         cal.set_yscale("log")
         cal.set_xlim(lo, hi)
         cal.set_ylim(lo, hi)
+        from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+        for axis_ in (cal.xaxis, cal.yaxis):
+            # less than a decade wide: the minor ticks' own labels (2×10⁻², 3×10⁻²…) ran into each other
+            axis_.set_minor_formatter(NullFormatter())
+            axis_.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
+            axis_.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
         cal.set_xlabel("predicted σ (RMS in bin) [px]")
         cal.set_ylabel("actual RMS error [px]")
         cal.legend(loc="upper left", fontsize=8, frameon=False)

@@ -34,7 +34,8 @@ from ._common import check_positive, prepare
 from .gaps import estimable_mask
 from .spectrum import SpectralEstimate, estimate_spectrum
 
-__all__ = ["integrate_inverse", "integrate_wiener_fft", "integrate_wiener", "WienerResult", "spectrum_for_lines"]
+__all__ = ["integrate_inverse", "integrate_wiener_fft", "integrate_wiener", "WienerResult", "spectrum_for_lines",
+           "lag_interpolation"]
 
 
 def _grid(n: int, taus: np.ndarray, dt: float, pad_fraction: float, max_lag_s: float = 0.0) -> int:
