@@ -16,6 +16,7 @@ matplotlib.use("Agg")
 
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter  # noqa: E402
 
 from reports import plotting as P  # noqa: E402
 from reports.report_data import AXES, minmax_decimate  # noqa: E402
@@ -305,8 +306,6 @@ def draw_uncertainty(axs, d: dict, axis: str, *, ifov_rad: float):
         cal.set_yscale("log")
         cal.set_xlim(lo, hi)
         cal.set_ylim(lo, hi)
-        from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
-
         for axis_ in (cal.xaxis, cal.yaxis):
             # less than a decade wide: the minor ticks' own labels (2×10⁻², 3×10⁻²…) ran into each other
             axis_.set_minor_formatter(NullFormatter())

@@ -49,7 +49,7 @@ from scipy.fft import irfft, next_fast_len, rfft
 from scipy.interpolate import CubicSpline
 from scipy.ndimage import uniform_filter1d
 
-from .synthesis import highpass_nan
+from .synthesis import highpass_gain, highpass_nan
 
 __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", "simulated_differentials",
            "fit_residual_rms", "fit_residuals", "band_power", "noise_colour_from_check", "coloured_noise",
@@ -121,7 +121,7 @@ def prior_draw(freq: np.ndarray, psd: np.ndarray, n: int, dt: float, rng: np.ran
     draw = irfft(spec, n=m)[:n]
     if highpass_hz <= 0:
         return draw
-    return draw, irfft(spec * (1.0 - 2.0 ** (-0.5 * (f / highpass_hz) ** 2)), n=m)[:n]
+    return draw, irfft(spec * highpass_gain(f, highpass_hz), n=m)[:n]
 
 
 def simulated_differentials(theta: np.ndarray, taus, lags, valid: np.ndarray, dt: float) -> np.ndarray:

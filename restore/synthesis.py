@@ -21,7 +21,8 @@ import numpy as np
 
 from simsat.units import AXES
 
-__all__ = ["SynthesisResult", "instant_synthesis", "highpass_nan", "fill_short_gaps", "window_compensation"]
+__all__ = ["SynthesisResult", "instant_synthesis", "highpass_nan", "highpass_gain", "fill_short_gaps",
+           "window_compensation"]
 
 
 
@@ -208,6 +209,12 @@ def _formal_sigma(x, inl, lines, rows_l, rows_c, w, sig_l, sig_c, n_lines: int) 
         inv = np.linalg.inv(nm[good])
         cov_diag[good] = np.sqrt(np.maximum(np.einsum("nii->ni", inv), 0) * s2)
     return cov_diag
+
+
+def highpass_gain(freq, cutoff_hz: float) -> np.ndarray:
+    """Gain of the estimate's high-pass at ``freq`` [Hz]: ``1 − 2^(−(f/f_c)²/2)`` (the complement of the
+    Gaussian low-pass :func:`highpass_nan` subtracts, −3 dB at ``cutoff_hz``)."""
+    return 1.0 - 2.0 ** (-0.5 * (np.asarray(freq, dtype=np.float64) / cutoff_hz) ** 2)
 
 
 def highpass_nan(signal: np.ndarray, *, dt: float, cutoff_hz: float, mode: str = "constant") -> np.ndarray:

@@ -4,7 +4,8 @@ from __future__ import annotations
 import math
 import numpy as np
 
-__all__ = ["prepare", "per_pair", "lag_samples", "check_positive", "lagrange4", "fractional_sample"]
+__all__ = ["prepare", "per_pair", "lag_samples", "check_positive", "lagrange4", "lagrange4_weights",
+           "fractional_sample"]
 
 
 def prepare(diffs, taus, dt) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -82,16 +83,22 @@ def check_positive(name: str, value, *, allow_zero: bool = False) -> float:
     return v
 
 
+def lagrange4_weights(frac) -> np.ndarray:
+    """4-point Lagrange interpolation weights at nodes ``-1, 0, 1, 2`` for positions ``frac`` (any shape,
+    usually in [0, 1)); returns shape ``frac.shape + (4,)``."""
+    u = np.asarray(frac, dtype=np.float64)
+    nodes = (-1.0, 0.0, 1.0, 2.0)
+    w = np.ones(u.shape + (4,))
+    for i, ni in enumerate(nodes):
+        for k, nk in enumerate(nodes):
+            if k != i:
+                w[..., i] *= (u - nk) / (ni - nk)
+    return w
+
+
 def lagrange4(frac: float) -> np.ndarray:
     """4-point Lagrange interpolation weights at ``-1, 0, 1, 2`` for position ``frac`` in [0, 1)."""
-    x = float(frac)
-    nodes = np.array([-1.0, 0.0, 1.0, 2.0])
-    w = np.ones(4)
-    for i in range(4):
-        for k in range(4):
-            if k != i:
-                w[i] *= (x - nodes[k]) / (nodes[i] - nodes[k])
-    return w
+    return lagrange4_weights(float(frac))
 
 
 def fractional_sample(x: np.ndarray, pos: np.ndarray) -> np.ndarray:
@@ -106,13 +113,9 @@ def fractional_sample(x: np.ndarray, pos: np.ndarray) -> np.ndarray:
     out = np.zeros(pos.shape)
     ok = (fl - 1 >= 0) & (fl + 2 < x.size)
     idx = np.clip(fl, 1, max(1, x.size - 3))
-    nodes = (-1.0, 0.0, 1.0, 2.0)
-    for i, ni in enumerate(nodes):
-        w = np.ones(pos.shape)
-        for k, nk in enumerate(nodes):
-            if k != i:
-                w *= (u - nk) / (ni - nk)
-        out += w * x[np.clip(idx + int(ni), 0, x.size - 1)]
+    w = lagrange4_weights(u)
+    for i, ni in enumerate((-1, 0, 1, 2)):
+        out += w[..., i] * x[np.clip(idx + ni, 0, x.size - 1)]
     # exact hits (integer positions) need only the sample itself
     exact = (u == 0) & (fl >= 0) & (fl < x.size)
     out = np.where(exact, x[np.clip(fl, 0, x.size - 1)], np.where(ok, out, np.nan))

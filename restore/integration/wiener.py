@@ -30,7 +30,7 @@ import math
 import numpy as np
 from scipy.fft import irfft, next_fast_len, rfft
 
-from ._common import check_positive, prepare
+from ._common import check_positive, lagrange4_weights, prepare
 from .gaps import estimable_mask
 from .spectrum import SpectralEstimate, estimate_spectrum
 
@@ -61,10 +61,7 @@ def lag_interpolation(lag_samples, m: int):
     n = lam.size
     pos = np.arange(n) + lam
     base = np.floor(pos)
-    x = pos - base
-    # Lagrange weights at nodes -1, 0, 1, 2 for position x in [0, 1)
-    w = np.stack([-x * (x - 1) * (x - 2) / 6, (x + 1) * (x - 1) * (x - 2) / 2,
-                  -(x + 1) * x * (x - 2) / 2, (x + 1) * x * (x - 1) / 6], axis=1)
+    w = lagrange4_weights(pos - base)
     cols = (base.astype(np.int64)[:, None] + np.arange(-1, 3)[None, :]) % m
     rows = np.repeat(np.arange(n), 4)
     return csr_matrix((w.ravel(), (rows, cols.ravel())), shape=(n, m))
