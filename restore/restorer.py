@@ -194,14 +194,21 @@ class Restorer:
             differentials = [stages.pair_differentials(p, s, n_lines, te) for p in used]
             t_syn += _time.perf_counter() - ts
             ti = _time.perf_counter()
+            recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings)
+            # a line whose synthesis is a gross error stands out of what the integrated attitude predicts:
+            # drop it (filled as a short gap) and integrate again
+            drops = [stages.differential_spikes(p, d, inc, s, te) for p, d in zip(used, differentials)]
+            if any(drops):
+                timings["despiked_lines"] = timings.get("despiked_lines", 0) + sum(
+                    int(m.sum()) for dr in drops for m in dr.values())
+                differentials = [stages.pair_differentials(p, s, n_lines, te, drop=dr) for p, dr in zip(used, drops)]
+                recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings)
+            records.update(recs)
             change = 0.0
             for a in s.axes:
-                rec = stages.integrate_differentials(a, used, differentials, estimate[a], s, te, where=product.path,
-                                                     psd_ceiling=ceilings.get(a))
-                records[a] = rec
-                new_est = np.where(np.isfinite(rec.increment), np.nan_to_num(estimate[a]) + rec.increment, np.nan)
+                new_est = np.where(np.isfinite(inc[a]), np.nan_to_num(estimate[a]) + inc[a], np.nan)
                 if np.isfinite(new_est).any():
-                    change = max(change, float(np.sqrt(np.nanmean(rec.increment ** 2)) /
+                    change = max(change, float(np.sqrt(np.nanmean(inc[a] ** 2)) /
                                                max(np.sqrt(np.nanmean(new_est ** 2)), 1e-300)))
                 estimate[a] = new_est
             t_int += _time.perf_counter() - ti
@@ -215,6 +222,16 @@ class Restorer:
             if a not in s.axes:
                 estimate[a] = np.zeros(n_lines)
         return pairs, records, estimate
+
+    def _integrate_axes(self, product: Product, used: list, differentials: list, estimate: dict,
+                        ceilings: dict) -> tuple:
+        """Integrate every restored axis's differentials once: ({axis: record}, {axis: increment})."""
+        s = self.settings
+        recs = {a: stages.integrate_differentials(a, used, differentials, estimate[a], s,
+                                                  product.instrument.line_period_s, where=product.path,
+                                                  psd_ceiling=ceilings.get(a))
+                for a in s.axes}
+        return recs, {a: r.increment for a, r in recs.items()}
 
     def lower_highpass(self, product: Product, pairs: list, knowledge: dict, records: dict, estimate: dict,
                        sigma: dict, timings: dict, bar) -> tuple:

@@ -29,6 +29,7 @@ class RestorationSettings:
     min_quality: float = 0.6
     axes: tuple = ("roll", "pitch")
     n_sigma: float = 3.0
+    despike_sigma: float = 10.0
     min_points_per_line: int = 3
     highpass_hz: float | str = "auto"
     max_gap_fill_lines: int = 8
@@ -59,6 +60,32 @@ CORRECTED_COMPRESSION = {
     "lz4": {"compression": "blosc_lz4", "complevel": 5, "blosc_shuffle": 1},
     "none": {},
 }
+
+
+def _parse_method(sec: Section, s: RestorationSettings) -> None:
+    """``method`` and its ``[restoration.integration]`` options, into ``s``."""
+    m = sec.raw("method", None)
+    if m is not None:
+        if not isinstance(m, str):
+            raise sec.error("method", f"must be a method name (string), got {m!r}")
+        if m != AUTO_METHOD:
+            try:
+                integration_method(m)
+            except ValueError as e:
+                raise sec.error("method", str(e).split(": ", 1)[1] + f" (or {AUTO_METHOD!r})") from None
+    s.method = m
+    opts = sec.section("integration")
+    if m == AUTO_METHOD:
+        if opts.data:
+            raise sec.error("integration", f"takes no options with method = {AUTO_METHOD!r} (it chooses between "
+                                           f"{', '.join(AUTO_CANDIDATES)} with their defaults); got "
+                                           f"{', '.join(sorted(opts.data))}")
+    else:
+        try:
+            s.integration_options = dict(check_options(m, dict(opts.data), where=opts.path))
+        except ValueError as e:
+            raise ScenarioError(str(e)) from None
+    opts.finish(extra_allowed=opts.data.keys())
 
 
 def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
@@ -95,32 +122,12 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     if len(set(s.axes)) != len(s.axes):
         raise sec.error("axes", f"names an axis twice: {list(s.axes)}")
     s.n_sigma = sec.number("n_sigma", s.n_sigma, gt=0)
+    s.despike_sigma = sec.number("despike_sigma", s.despike_sigma, ge=0)
     s.min_points_per_line = sec.integer("min_points_per_line", s.min_points_per_line, ge=2)
     s.highpass_hz = sec.number_or("highpass_hz", "auto", ge=0, le=1e4)
     s.max_gap_fill_lines = sec.integer("max_gap_fill_lines", s.max_gap_fill_lines, ge=0)
     s.compensate_window = sec.boolean("compensate_window", s.compensate_window)
-    m = sec.raw("method", None)
-    if m is not None:
-        if not isinstance(m, str):
-            raise sec.error("method", f"must be a method name (string), got {m!r}")
-        if m != AUTO_METHOD:
-            try:
-                integration_method(m)
-            except ValueError as e:
-                raise sec.error("method", str(e).split(": ", 1)[1] + f" (or {AUTO_METHOD!r})") from None
-    s.method = m
-    opts = sec.section("integration")
-    if m == AUTO_METHOD:
-        if opts.data:
-            raise sec.error("integration", f"takes no options with method = {AUTO_METHOD!r} (it chooses between "
-                                           f"{', '.join(AUTO_CANDIDATES)} with their defaults); got "
-                                           f"{', '.join(sorted(opts.data))}")
-    else:
-        try:
-            s.integration_options = dict(check_options(m, dict(opts.data), where=opts.path))
-        except ValueError as e:
-            raise ScenarioError(str(e)) from None
-    opts.finish(extra_allowed=opts.data.keys())
+    _parse_method(sec, s)
     s.iterations = sec.integer("iterations", s.iterations, ge=1, le=10)
     s.pair_order = sec.string("pair_order", s.pair_order, choices=("fused", "best_first"))
     s.anchor_star_tracker = sec.boolean("anchor_star_tracker", s.anchor_star_tracker)

@@ -19,7 +19,7 @@ from .correction import correct_bands, line_median, misregistration, rank_within
 from .errors import RestorationError
 from .integration.wiener import spectrum_for_lines
 from .matching import match_points, support_margin
-from .method_choice import resolve_method
+from .method_choice import predicted_differential, resolve_method
 from .observability import observability
 from .knowledge_prior import knowledge_psd_ceiling
 from .posterior import posterior_sigma
@@ -32,6 +32,7 @@ from .synthesis import (
     drop_sparse,
     fill_short_gaps,
     instant_synthesis,
+    spikes,
     window_compensation,
 )
 
@@ -391,12 +392,20 @@ class PairDifferentials:
 
 
 def pair_differentials(pair: PairData, settings: RestorationSettings, n_lines: int,
-                       line_period_s: float) -> PairDifferentials:
-    """Condition a synthesised pair's differentials for the integration (gaps, window, lags, weights)."""
+                       line_period_s: float, *, drop: dict | None = None) -> PairDifferentials:
+    """Condition a synthesised pair's differentials for the integration (gaps, window, lags, weights).
+
+    ``drop``: axis → lines (boolean mask) whose synthesis is a gross error
+    (:func:`differential_spikes`): dropped before the gaps are handled, so
+    that an isolated one is filled as a short gap.
+    """
     res = pair.synthesis
     diffs, sigmas = {}, {}
     for k, a in enumerate(AXES):
-        d = drop_sparse(res.diff[:, k], half_window=max(settings.max_gap_fill_lines, 1))
+        d = res.diff[:, k]
+        if drop and a in drop:
+            d = np.where(drop[a], np.nan, d)
+        d = drop_sparse(d, half_window=max(settings.max_gap_fill_lines, 1))
         d = fill_short_gaps(d, max_gap=settings.max_gap_fill_lines)
         if settings.compensate_window:
             d = window_compensation(d, window_lines=settings.window[0])
@@ -406,6 +415,29 @@ def pair_differentials(pair: PairData, settings: RestorationSettings, n_lines: i
                       settings.min_points_per_line).astype(np.float64)
     lag = line_lag(pair, n_lines, settings.max_gap_fill_lines) * line_period_s
     return PairDifferentials(tau_s=pair.tau_s, diffs=diffs, sigmas=sigmas, lag_s=lag, weight=weight)
+
+
+def differential_spikes(pair: PairData, differentials: PairDifferentials, increments: dict,
+                        settings: RestorationSettings, line_period_s: float) -> dict:
+    """Axis → lines of the pair whose synthesised differential is a gross error (:func:`restore.synthesis.spikes`).
+
+    The residual is the synthesised differential (before gap filling and
+    window compensation) minus the differential that ``increments`` (what
+    the last integration added, per axis) predicts at the pair's delay and
+    per-line lags. Empty with ``settings.despike_sigma = 0``.
+    """
+    if settings.despike_sigma <= 0:
+        return {}
+    out = {}
+    for k, a in enumerate(AXES):
+        if a not in increments:
+            continue
+        pred = predicted_differential(np.nan_to_num(increments[a]), differentials.tau_s, line_period_s,
+                                      differentials.lag_s)
+        mask = spikes(pair.synthesis.diff[:, k] - pred, n_sigma=settings.despike_sigma)
+        if mask.any():
+            out[a] = mask
+    return out
 
 
 # --------------------------------------------------------------------------- integrate

@@ -22,7 +22,7 @@ import numpy as np
 from simsat.units import AXES
 
 __all__ = ["SynthesisResult", "instant_synthesis", "highpass_nan", "highpass_gain", "fill_short_gaps",
-           "window_compensation"]
+           "window_compensation", "spikes"]
 
 
 
@@ -266,6 +266,43 @@ def drop_sparse(signal: np.ndarray, *, half_window: int, min_fraction: float = 0
     inside = uniform_filter1d(np.ones(x.size), 2 * int(half_window) + 1, mode="constant", cval=0.0)
     x[m & (frac < min_fraction * inside - 1e-12)] = np.nan
     return x
+
+
+def spikes(residual: np.ndarray, *, n_sigma: float, size: int = 9, max_fraction: float = 0.005) -> np.ndarray:
+    """Lines whose residual is an isolated gross error: boolean mask (False where the residual is NaN).
+
+    ``residual`` is what a model of the jitter leaves of a differential (the
+    measured minus the differential the integrated attitude predicts): noise
+    and a little smooth misfit. A line that departs from the running median
+    of its ``size`` finite neighbours by more than ``n_sigma`` robust
+    standard deviations (1.4826 × MAD of those departures), while both its
+    neighbours stay within, is a failed synthesis (a repeated texture, a
+    handful of matches all wrong), not jitter: left in, a 6 px spike on one
+    line of one pair spreads over tenths of a second of the integrated
+    attitude. Lines that depart that far *in runs* are the model's misfit,
+    not failed lines (at several pixels of jitter the integration misses part
+    of it where the attitude moves fastest, a few lines at a time): when more
+    than ``max_fraction`` of the lines (and more than 4) do, the model is
+    what fails and nothing is flagged. ``n_sigma <= 0``: none.
+    """
+    from scipy.ndimage import median_filter
+
+    x = np.asarray(residual, dtype=np.float64)
+    out = np.zeros(x.shape, dtype=bool)
+    ok = np.isfinite(x)
+    if n_sigma <= 0 or ok.sum() < 4 * size:
+        return out
+    v = x[ok]
+    r = v - median_filter(v, size=int(size), mode="mirror")
+    sigma = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    if not sigma > 0:
+        return out
+    far = np.abs(r) > n_sigma * sigma
+    alone = far & ~np.r_[False, far[:-1]] & ~np.r_[far[1:], False]
+    if (far & ~alone).sum() > max(4.0, max_fraction * v.size):
+        return out
+    out[np.flatnonzero(ok)[alone]] = True
+    return out
 
 
 def fill_short_gaps(signal: np.ndarray, *, max_gap: int) -> np.ndarray:
