@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.ndimage import maximum_filter1d
 
 from simsat.attitude import AttitudeSeries
 from simsat.config import ScenarioError
@@ -381,7 +382,8 @@ class PairDifferentials:
 
     ``diffs``/``sigmas``: axis → (N,) [rad] (gaps dropped/filled, window
     compensated); ``lag_s``: extra delay per line [s]; ``weight``: relative
-    weight per line (matched points, at least ``min_points_per_line``).
+    weight per line (matched points, at least ``min_points_per_line``; 0 on
+    filled lines).
     """
 
     tau_s: float
@@ -395,24 +397,39 @@ def pair_differentials(pair: PairData, settings: RestorationSettings, n_lines: i
                        line_period_s: float, *, drop: dict | None = None) -> PairDifferentials:
     """Condition a synthesised pair's differentials for the integration (gaps, window, lags, weights).
 
+    Short gaps are filled (cubic) for the methods and filters that need
+    uniform samples; the filled lines, and the neighbours the window
+    compensation mixes them into, get weight 0 (a method that weighs its
+    samples treats them as missing).
+
     ``drop``: axis → lines (boolean mask) whose synthesis is a gross error
     (:func:`differential_spikes`): dropped before the gaps are handled, so
     that an isolated one is filled as a short gap.
     """
     res = pair.synthesis
     diffs, sigmas = {}, {}
+    filled = np.zeros(res.diff.shape[0], dtype=bool)
     for k, a in enumerate(AXES):
         d = res.diff[:, k]
         if drop and a in drop:
             d = np.where(drop[a], np.nan, d)
         d = drop_sparse(d, half_window=max(settings.max_gap_fill_lines, 1))
+        gaps = ~np.isfinite(d)
         d = fill_short_gaps(d, max_gap=settings.max_gap_fill_lines)
+        filled |= gaps & np.isfinite(d)
         if settings.compensate_window:
             d = window_compensation(d, window_lines=settings.window[0])
         diffs[a] = d
         sigmas[a] = res.sigma[:, k]
     weight = np.where(res.n_points >= settings.min_points_per_line, res.n_points,
                       settings.min_points_per_line).astype(np.float64)
+    # a filled line is an interpolation, not a measurement: it serves the spectrum estimate and the window
+    # compensation (whose taps reach its neighbours) but carries no weight (where a fold of the band at
+    # several pixels of jitter makes the differential jump, a cubic through the gap is pixels off)
+    h = settings.window[0] // 2 if settings.compensate_window else 0
+    if h and filled.any():
+        filled = maximum_filter1d(filled.astype(np.uint8), 2 * h + 1).astype(bool)
+    weight = np.where(filled, 0.0, weight)
     lag = line_lag(pair, n_lines, settings.max_gap_fill_lines) * line_period_s
     return PairDifferentials(tau_s=pair.tau_s, diffs=diffs, sigmas=sigmas, lag_s=lag, weight=weight)
 

@@ -59,6 +59,13 @@ def test_a_dropped_line_is_filled_as_a_short_gap():
     assert kept.diffs["pitch"][100] == 7.0
     assert dropped.diffs["pitch"][100] == pytest.approx(np.sin(2 * np.pi * 100 / 50.0), abs=1e-3)
     np.testing.assert_array_equal(dropped.diffs["roll"], kept.diffs["roll"])
+    # the filled line is an interpolation: no weight in the integration, the others keep theirs
+    assert kept.weight[100] == 20 and dropped.weight[100] == 0
+    assert np.all(np.delete(dropped.weight, 100) == 20)
+    # with the window compensation its taps reach the neighbours: they lose their weight too
+    comp = stages.pair_differentials(pair, replace(s, compensate_window=True, window=(3, 31)), 200, 4e-4,
+                                     drop={"pitch": drop})
+    assert np.flatnonzero(comp.weight == 0).tolist() == [99, 100, 101]
 
 
 @pytest.fixture(scope="module")
