@@ -89,14 +89,16 @@ def noise_per_line(record) -> np.ndarray:
 
     The integration's own model: the pair's noise level (from the prior it
     estimated) over the square root of the line's relative weight (mean 1 over
-    the valid lines). A method that reports no noise level falls back on the
-    per-line formal σ of the synthesis.
+    the valid lines); a line of weight 0 (filled, ignored by the integration)
+    gets the pair's level. A method that reports no noise level falls back on
+    the per-line formal σ of the synthesis.
     """
     d = np.asarray(record.diffs, dtype=np.float64)
     valid = np.isfinite(d)
     if record.spectrum is not None:
         w = np.where(valid, np.asarray(record.weights, dtype=np.float64), np.nan)
         w = w / np.nanmean(w, axis=1, keepdims=True)
+        w = np.where(w > 0, w, 1.0)
         sig = np.asarray(record.spectrum.noise_std, dtype=np.float64)[:, None] / np.sqrt(w)
     else:
         sig = np.asarray(record.sigmas, dtype=np.float64)

@@ -126,6 +126,22 @@ def test_weights_lower_the_noise_of_heavy_lines():
     assert sig[0, 0] / sig[0, -1] == pytest.approx(0.5, rel=1e-9)
 
 
+def test_lines_of_weight_zero_keep_a_finite_noise_and_a_finite_sigma():
+    """Filled lines carry weight 0 (the integration ignores them): the Monte Carlo's noise there is the
+    pair's level, not 1/0, and the predicted σ stays finite and close to the all-weights-one one."""
+    w = np.ones((3, N))
+    w[:, 300:303] = 0.0
+    rec, _ = _record(weights=w)
+    sig = noise_per_line(rec)
+    assert np.all(np.isfinite(sig))
+    assert sig[0, 301] == pytest.approx(0.3e-6, rel=1e-12)             # the pair's level
+    assert sig[0, 0] == pytest.approx(0.3e-6, rel=1e-3)
+    ps = posterior_sigma(rec, samples=8, seed=0)
+    ref = posterior_sigma(_record()[0], samples=8, seed=0)
+    assert np.all(np.isfinite(ps.sigma))
+    assert np.sqrt(np.mean(ps.sigma ** 2)) == pytest.approx(np.sqrt(np.mean(ref.sigma ** 2)), rel=0.15)
+
+
 def test_fit_residual_of_a_perfect_estimate_is_the_noise():
     t = np.arange(N + 100) * DT
     th = 1e-6 * np.sin(2 * np.pi * 30 * t)
