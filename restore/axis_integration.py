@@ -31,6 +31,7 @@ from scipy.interpolate import CubicSpline
 
 from .integration import integrate
 from .integration.methods import IntegrationMethod, integration_method
+from .integration.wiener import blind_tones, tone_columns
 from .synthesis import highpass_nan
 
 __all__ = ["AxisIntegration", "PriorSpectrum", "integrate_axis", "lag_corrected_differentials", "periodic_highpass"]
@@ -43,6 +44,8 @@ class PriorSpectrum:
     freq: np.ndarray
     psd: np.ndarray
     noise_std: np.ndarray
+    #: a tone on a frequency every pair is blind to, found through the lags: ([Hz], prior sd [rad]) or None
+    tones: tuple | None = None
 
 
 @dataclass
@@ -129,6 +132,29 @@ def periodic_highpass(theta: np.ndarray, grid: np.ndarray, *, dt: float, cutoff_
     return hp
 
 
+def _with_blind_tone(res, prior, spec, diffs, measured, taus, dt, opts, data, lags, details):
+    """The lag-aware MAP again with a tone on a common blind frequency when the lags show one
+    (:func:`restore.integration.wiener.blind_tones`), its prior estimated again without the tone's
+    sidebands (the first estimate took them for attitude); (res, prior) unchanged otherwise."""
+    tones = blind_tones(measured, taus, dt, psd=(prior.freq, prior.psd), noise_std=prior.noise_std,
+                        weights=data.get("weights"), lags=lags)
+    if tones is None:
+        return res, prior
+    fixed = spec.frozen_options(opts, prior)
+    first = integrate(measured, taus, dt, method=spec.name, **fixed, **data, lags=lags, tones=tones, **details)
+    x, _ = tone_columns(tones, len(measured[0]), 0, taus, dt, [np.nan_to_num(np.asarray(lg)) for lg in lags])
+    sidebands = np.einsum("pnq,q->pn", x, first.tones)
+    again = integrate([d - sb for d, sb in zip(diffs, sidebands)], taus, dt, method=spec.name, **opts, **data,
+                      **details)
+    prior = PriorSpectrum(np.asarray(again.spectrum.freq, dtype=np.float64),
+                          np.asarray(again.spectrum.psd, dtype=np.float64),
+                          np.broadcast_to(np.asarray(again.spectrum.noise_std, dtype=np.float64),
+                                          (len(taus),)).copy(), tones=tones)
+    res = integrate(measured, taus, dt, method=spec.name, **spec.frozen_options(opts, prior), **data, lags=lags,
+                    **details)
+    return res, prior
+
+
 def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options: dict | None = None,
                    lags=None, sigmas=None, weights=None, highpass_hz: float = 0.0,
                    psd_ceiling=None, first_stage_gcv: bool = True) -> AxisIntegration:
@@ -191,6 +217,8 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
         if exact_lags:
             fixed = spec.frozen_options(opts, prior)
             res = integrate(measured, taus, dt, method=spec.name, **fixed, **data, lags=lags, **details)
+            if spec.blind_tones and "tones" not in opts:
+                res, prior = _with_blind_tone(res, prior, spec, diffs, measured, taus, dt, opts, data, lags, details)
     elif exact_lags:
         res = integrate(measured, taus, dt, method=spec.name, **opts, **data, lags=lags, **details)
     else:

@@ -178,7 +178,11 @@ def _integration_variables(res: RestorationResult) -> tuple[dict, dict]:
                 "units": "rad2 s", "long_name": "PSD prior the method estimated from the data (two-sided)"})
             nstd = np.full(len(names), np.nan)
             nstd[idx] = rec.spectrum.noise_std
-            data[f"prior_noise_std_{a}"] = ("pair", nstd, {"units": "rad"})
+            attrs = {"units": "rad"}
+            if rec.spectrum.tones is not None:  # the blind-frequency tone found through the lags
+                attrs.update(blind_tone_hz=np.asarray(rec.spectrum.tones[0], dtype=np.float64),
+                             blind_tone_prior_sd_rad=float(rec.spectrum.tones[1]))
+            data[f"prior_noise_std_{a}"] = ("pair", nstd, attrs)
     return data, coords
 
 
@@ -267,6 +271,10 @@ def _records_from(ds, info: dict) -> dict:
         if f"prior_psd_{a}" in ds.variables:
             spec = PriorSpectrum(np.asarray(ds[f"prior_freq_{a}"].values, dtype=np.float64),
                                  _values(ds, f"prior_psd_{a}"), _values(ds, f"prior_noise_std_{a}")[idx])
+            at = ds[f"prior_noise_std_{a}"].attrs
+            if "blind_tone_hz" in at:
+                spec.tones = ([float(x) for x in np.atleast_1d(at["blind_tone_hz"])],
+                              float(at["blind_tone_prior_sd_rad"]))
         out[a] = IntegrationRecord(
             axis=a, pairs=list(meta["pairs"]), diffs=_values(ds, f"integrated_diff_{a}")[idx],
             sigmas=_values(ds, f"integrated_sigma_{a}")[idx], taus=_values(ds, f"integrated_tau_{a}")[idx],

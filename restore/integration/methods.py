@@ -13,6 +13,9 @@ Callers never branch on a method's name: they ask its spec what it can do.
   brought back to the nominal lag, then the method runs again on the
   differentials as measured, lags modelled (a prior estimated from lagged
   differentials is wrong by the lags' modulation at large amplitude);
+* ``blind_tones`` — with lags modelled, also estimates a tone on a frequency
+  every pair is blind to, which only the lags show
+  (:func:`restore.integration.wiener.blind_tones`; ``tones=`` when frozen);
 * ``line_sigmas`` — takes ``sigmas=`` (per-line formal σ of the differentials);
 * ``reports_spectrum`` — adapts its prior to the data and, with
   ``return_details=True``, reports the PSD prior and noise levels it used
@@ -57,6 +60,7 @@ class IntegrationMethod:
     line_weights: bool = False
     line_lags: bool = False
     prior_lags: bool = False
+    blind_tones: bool = False
     line_sigmas: bool = False
     reports_spectrum: bool = False
     psd_ceiling: bool = False
@@ -93,7 +97,10 @@ class IntegrationMethod:
         """``options`` with the prior a data-adaptive run used (``spectrum``: freq, psd, noise_std) fixed."""
         if spectrum is None:
             return dict(options)
-        return {**options, "psd": (spectrum.freq, spectrum.psd), "noise_std": spectrum.noise_std}
+        out = {**options, "psd": (spectrum.freq, spectrum.psd), "noise_std": spectrum.noise_std}
+        if getattr(spectrum, "tones", None) is not None:
+            out["tones"] = spectrum.tones
+        return out
 
 
 def _spec(name, module, function_name, principle, **caps) -> IntegrationMethod:
@@ -104,7 +111,7 @@ def _spec(name, module, function_name, principle, **caps) -> IntegrationMethod:
 INTEGRATION_METHODS: dict[str, IntegrationMethod] = {s.name: s for s in (
     _spec("wiener", "wiener", "integrate_wiener",
           "exact multi-pair Wiener / MAP on the finite record, data-estimated PSD prior, CG",
-          line_weights=True, reports_spectrum=True, psd_ceiling=True, prior_lags=True),
+          line_weights=True, reports_spectrum=True, psd_ceiling=True, prior_lags=True, blind_tones=True),
     _spec("wiener_fft", "wiener", "integrate_wiener_fft", "one-shot multi-pair Wiener filter (FFT)"),
     _spec("inverse", "wiener", "integrate_inverse", "pseudo-inverse conj(G) / (|G|² + k)", gain_option="k"),
     _spec("local", "local", "integrate_local", "CNES local integration w = R⁻¹ r"),

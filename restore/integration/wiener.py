@@ -67,6 +67,27 @@ def lag_interpolation(lag_samples, m: int):
     return csr_matrix((w.ravel(), (rows, cols.ravel())), shape=(n, m))
 
 
+def tone_waves(freqs, n: int, dt: float, t0: float = 0.0) -> np.ndarray:
+    """(n, 2q) columns cos, sin of each frequency at ``t0 + k dt``."""
+    t = t0 + np.arange(n) * dt
+    ph = 2 * np.pi * np.asarray(freqs, dtype=np.float64)[None, :] * t[:, None]
+    return np.concatenate([np.cos(ph), np.sin(ph)], axis=1)
+
+
+def tone_columns(tones, n: int, m: int, taus, dt: float, lags) -> tuple:
+    """Differentials (pair, sample, 2q) of unit cos / sin tones, with the lags, and their prior sd (2q,)."""
+    freqs, sd = np.atleast_1d(np.asarray(tones[0], dtype=np.float64)), np.asarray(tones[1], dtype=np.float64)
+    t = np.arange(n) * dt
+    now = tone_waves(freqs, n, dt)
+    cols = []
+    for j, tau in enumerate(taus):
+        lag = np.zeros(n) if lags is None else lags[j]
+        ph = 2 * np.pi * freqs[None, :] * (t + tau + lag)[:, None]
+        cols.append(np.concatenate([np.cos(ph), np.sin(ph)], axis=1) - now)
+    return np.stack(cols), np.broadcast_to(np.r_[sd, sd] if sd.ndim else np.full(2 * freqs.size, float(sd)),
+                                           (2 * freqs.size,)).astype(np.float64)
+
+
 def _finish(theta: np.ndarray, valid, taus, dt, max_gap_s) -> np.ndarray:
     mask = estimable_mask(valid, taus, dt, max_gap=_default_max_gap(taus, dt, max_gap_s))
     out = np.where(mask, theta, np.nan)
@@ -201,7 +222,7 @@ class WienerResult:
 
 
 def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=None, rel_weights=None,
-              lag_ops=None):
+              lag_ops=None, extra=None):
     """Solve the MAP normal equations on the periodic grid of length ``m``.
 
     ``theta0`` (length ``m``, optional) warm-starts the iteration;
@@ -209,9 +230,13 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
     noise variance ``1 / sigma_j²`` (mean 1 over the valid samples);
     ``lag_ops`` (one :func:`lag_interpolation` per pair, optional) makes the
     forward model ``θ(t + τ_j + λ_j(t)) − θ(t)`` exactly (time synchronisation
-    inside the MAP instead of a correction of the data).
+    inside the MAP instead of a correction of the data). ``extra`` (``X``
+    (pair, sample, q), ``sd`` (q,)), optional, adds q parameters ``a`` of
+    prior ``N(0, sd²)`` whose differentials are ``X a`` (a tone on a
+    frequency every pair is blind to, seen through the lags only:
+    :func:`blind_tones`); their estimate is returned last.
     Returns (theta on the record, theta on the grid, predicted differentials,
-    iterations, residual).
+    iterations, residual[, extra parameters]).
     """
     p, n = D.shape
     c = np.sqrt(S / dt)
@@ -240,22 +265,37 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
             acc = (np.conj(shift) * rfft(back, n=m, axis=-1)).sum(0) - rfft(r.sum(0), n=m)
             return irfft(c * acc, n=m)
 
+    q = 0
+    if extra is not None:
+        xs = np.asarray(extra[0], dtype=np.float64) * np.asarray(extra[1], dtype=np.float64)[None, None, :]
+        q = xs.shape[2]
+        xs = np.where(valid[:, :, None], xs, 0.0)
+        field_fwd, field_adj = forward, adjoint
+
+        def forward(u: np.ndarray) -> np.ndarray:  # noqa: F811 - the field and the extra parameters
+            return field_fwd(u[:m]) + np.einsum("pnq,q->pn", xs, u[m:])
+
+        def adjoint(r: np.ndarray) -> np.ndarray:  # noqa: F811
+            return np.concatenate([field_adj(r), np.einsum("pnq,pn->q", xs, r)])
+
     def normal(z: np.ndarray) -> np.ndarray:
         return z + adjoint(forward(z) * w)
 
     b = adjoint(dz * w)
     frac = valid.sum(1) / m
     diag = 1.0 + (np.abs(kop) ** 2 * (frac / sigma**2)[:, None]).sum(0)
+    diag_x = 1.0 + np.einsum("pnq,pn->q", xs * xs, w) if q else None
 
     def precond(r: np.ndarray) -> np.ndarray:
-        return irfft(rfft(r) / diag, n=m)
+        out = irfft(rfft(r[:m]) / diag, n=m)
+        return out if not q else np.concatenate([out, r[m:] / diag_x])
 
     # plain sums rather than BLAS dots: cheap at this size, and immune to BLAS threading
     if theta0 is None:
-        z = np.zeros(m)
+        z = np.zeros(m + q)
         r = b.copy()
     else:  # z0 = L^-1 theta0 on the prior's support
-        z = irfft(np.where(c > 0, rfft(theta0) / np.where(c > 0, c, 1.0), 0.0), n=m)
+        z = np.concatenate([irfft(np.where(c > 0, rfft(theta0) / np.where(c > 0, c, 1.0), 0.0), n=m), np.zeros(q)])
         r = b - normal(z)
     bn = math.sqrt(float(np.sum(b * b))) or 1.0
     y = precond(r)
@@ -274,14 +314,16 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
         ry_new = float(np.sum(r * y))
         d = y + (ry_new / ry) * d
         ry = ry_new
-    grid = irfft(c * rfft(z), n=m)
+    grid = irfft(c * rfft(z[:m]), n=m)
+    if q:
+        return grid[:n], grid, forward(z), it, res, z[m:] * np.asarray(extra[1], dtype=np.float64)
     return grid[:n], grid, forward(z), it, res
 
 
 def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction: float = 0.5,
                      tol: float = 1e-7, maxiter: int = 300, refine: int | None = None,
                      max_gap_s: float | None = None, spectrum_options: dict | None = None,
-                     weights=None, psd_ceiling=None, lags=None, return_details: bool = False):
+                     weights=None, psd_ceiling=None, lags=None, tones=None, return_details: bool = False):
     """Exact multi-pair Wiener (MAP) integration on the finite record, by conjugate gradients.
 
     With gaps, the first PSD estimate comes from the gap-free segments only
@@ -327,6 +369,12 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         :func:`lag_interpolation`); non-finite = 0. The prior, when estimated,
         is estimated from the differentials as given (a lag of a few samples
         barely moves a PSD smoothed over many bins).
+    tones : (frequencies, sd), keyword-only
+        Sinusoids [Hz] on frequencies every pair is blind to, estimated with
+        the field (prior ``N(0, sd²)`` on each coefficient, rad): there the
+        differentials see them only through the lags (:func:`blind_tones`).
+        The estimate returned includes them; ``WienerResult.tones`` holds
+        their (cos, sin) coefficients.
     return_details : bool, keyword-only
         Return a :class:`WienerResult` instead of the array.
 
@@ -379,9 +427,10 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         S[0] = 0.0
         if m % 2 == 0:
             S[-1] = 0.0  # keep the operator exactly self-adjoint on real signals
-        full, grid, pred, it, res = _cg_solve(D, valid, taus, dt, spec.freq, S, spec.noise_std,
-                                              m, tol=tol, maxiter=maxiter, theta0=grid, rel_weights=rel,
-                                              lag_ops=lag_ops)
+        out = _cg_solve(D, valid, taus, dt, spec.freq, S, spec.noise_std, m, tol=tol, maxiter=maxiter,
+                        theta0=grid, rel_weights=rel, lag_ops=lag_ops,
+                        extra=None if tones is None else tone_columns(tones, n, m, taus, dt, lag_arr))
+        full, grid, pred, it, res = out[:5]
         if k == passes:
             break
         sigma = noise_std
@@ -390,10 +439,83 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
                               for j in range(p)])
         filled = np.where(valid, D, pred)
         spec = estimate_spectrum(filled, taus, dt, n_fft=m, noise_std=sigma, **opts)
+    coefs = out[5] if tones is not None else None
+    if coefs is not None:  # the tones join the field, on the record and on the grid
+        wave = tone_waves(tones[0], m, dt) @ coefs
+        full, grid = full + wave[:n], grid + wave
     theta = _finish(full, valid, taus, dt, max_gap_s)
     if return_details:
-        return WienerResult(theta, full - np.mean(full), spec, it, res, theta_grid=grid - np.mean(full))
+        r = WienerResult(theta, full - np.mean(full), spec, it, res, theta_grid=grid - np.mean(full))
+        r.tones = coefs
+        return r
     return theta
+
+
+def common_blind_frequencies(taus, dt: float, record_s: float, top_hz: float) -> np.ndarray:
+    """Frequencies in (0, ``top_hz``] at which every pair is blind (``f τ_j`` whole for all j) [Hz].
+
+    Found on a grid of a quarter of the record's resolution: the local minima
+    of ``Σ_j |G_j(f)|²`` below a hundredth of the pairs' count, i.e. where
+    the fused gain is what a mismatch of a fraction of a bin leaves.
+    """
+    taus = np.asarray(taus, dtype=np.float64)
+    step = 0.25 / max(record_s, 1e-9)
+    f = np.arange(0.5 / taus.max(), min(top_hz, 0.5 / dt) + step, step)
+    if f.size < 3:
+        return np.zeros(0)
+    g = (2 * (1 - np.cos(2 * np.pi * f[:, None] * taus[None, :]))).sum(1)
+    low = g < 0.01 * taus.size * 4
+    i = np.flatnonzero(low[1:-1] & (g[1:-1] <= g[:-2]) & (g[1:-1] <= g[2:])) + 1
+    # the vertex of the parabola through the grid's minimum and its neighbours (g is quadratic there)
+    den = g[i - 1] - 2 * g[i] + g[i + 1]
+    off = np.where(den > 0, 0.5 * (g[i - 1] - g[i + 1]) / np.where(den > 0, den, 1.0), 0.0)
+    return f[i] + np.clip(off, -1.0, 1.0) * step
+
+
+def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: float = 1e-6,
+                maxiter: int = 300, n_sigma: float = 6.0):
+    """A tone on a frequency every pair is blind to, seen through the per-line lags: ``(frequencies, sd)`` or None.
+
+    At a common blind frequency ``f_b`` the differentials of a tone vanish at
+    the nominal delays, but band B sees line l at ``t + τ + λ(l)``: the tone
+    leaves ``θ'(t) λ(t)`` — sidebands at ``f_b ± `` the lags' frequencies,
+    which a spectrum estimate takes for attitude there. Near each common
+    blind frequency below the prior's highest frequency (× 1.2) the MAP is
+    solved with one tone of broad prior added, at the blind frequency and
+    ± half and one resolution bin; the tone with the largest amplitude over its
+    standard error wins if that exceeds ``n_sigma``.
+    """
+    D, valid, taus_a, dt = prepare(diffs, taus, dt)
+    n = D.shape[1]
+    f, S = np.asarray(psd[0], dtype=np.float64), np.asarray(psd[1], dtype=np.float64)
+    if lags is None or not np.any(S > 0):
+        return None
+    record_s = n * dt
+    top = 1.2 * float(f[S > 0].max())
+    centres = common_blind_frequencies(taus_a, dt, record_s, top)
+    if centres.size == 0:
+        return None
+    sd = 2.0 * math.sqrt(max(2.0 * float(np.sum(S)) * float(f[1] - f[0]), 1e-300))
+    lag_arr = [np.nan_to_num(np.asarray(x, dtype=np.float64)) for x in lags]
+    w = (np.where(valid, 1.0, 0.0) if weights is None else
+         np.where(valid, np.nan_to_num(np.asarray(weights, dtype=np.float64)), 0.0))
+    w = w / np.maximum(w.sum(1, keepdims=True) / np.maximum(valid.sum(1, keepdims=True), 1), 1e-300)
+    w = w / np.asarray(noise_std, dtype=np.float64)[:, None] ** 2
+    best = None
+    for fc in centres:
+        for k in (-1.0, -0.5, 0.0, 0.5, 1.0):
+            fk = fc + k / record_s
+            r = integrate_wiener(diffs, taus, dt, psd=psd, noise_std=noise_std, weights=weights, lags=lags,
+                                 tones=([fk], sd), tol=tol, maxiter=maxiter, return_details=True)
+            x, _ = tone_columns(([fk], sd), n, 0, taus_a, dt, lag_arr)
+            info = np.einsum("pni,pn,pnk->ik", np.where(valid[:, :, None], x, 0.0), w, x)
+            se = float(np.sqrt(np.mean(np.diag(np.linalg.pinv(info)))))
+            z = float(np.hypot(*r.tones)) / max(se, 1e-300)
+            if best is None or z > best[0]:
+                best = (z, fk)
+    if best is None or best[0] < n_sigma:
+        return None
+    return [best[1]], sd
 
 
 def spectrum_for_lines(diffs, taus, dt, *, noise_std=None, spectrum_options: dict | None = None,

@@ -325,6 +325,26 @@ def test_restoration_round_trips_through_its_file(tiny_restored):
         assert back.noise_scale[a] == res.noise_scale[a]
 
 
+def test_a_blind_frequency_tone_round_trips_through_the_file(tiny_restored, tmp_path):
+    """The tone found through the lags (frequency, prior sd) is part of the frozen filter: it is written with
+    the prior and read back, so that the report's reruns integrate as the restoration did."""
+    import copy
+
+    from restore.restoration_io import restoration_dataset, result_from_dataset
+
+    _, res = tiny_restored
+    res = copy.deepcopy(res)
+    rec = res.integration["pitch"]
+    assert rec.spectrum.tones is None
+    rec.spectrum.tones = ([135.1351], 3.0e-6)
+    path = tmp_path / "restoration.nc"
+    restoration_dataset(res).to_netcdf(path)
+    back = result_from_dataset(xr.load_dataset(path), path)
+    assert back.integration["pitch"].spectrum.tones == ([135.1351], 3.0e-6)
+    assert back.integration["roll"].spectrum.tones is None
+    assert back.integration["pitch"].frozen_options()["tones"] == ([135.1351], 3.0e-6)
+
+
 def test_every_restored_line_has_a_predicted_sigma_and_flagged_lines_are_not_restored(tiny_restored):
     d, res = tiny_restored
     ds = xr.load_dataset(d / "restoration.nc")
