@@ -67,6 +67,18 @@ def test_a_tone_on_the_common_blind_frequency_is_found_through_the_lags_and_rest
     assert with_tone < 0.25 * without
 
 
+def test_one_tone_in_the_data_one_tone_found_when_more_are_allowed():
+    from restore.integration.wiener import blind_tones
+
+    t, truth, diffs, lags = _record(tone_rad=1.2e-6, seed=5)
+    res = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags)
+    prior = res.spectrum
+    found = blind_tones(diffs, TAUS, DT, psd=(prior.freq, prior.psd), noise_std=prior.noise_std, lags=lags,
+                        max_tones=3)
+    assert found is not None and len(found[0]) == 1
+    assert abs(found[0][0] - BLIND_HZ) < 0.5 / (t.size * DT)
+
+
 def test_no_tone_no_detection_and_the_frozen_rerun_keeps_the_tone():
     t, truth, diffs, lags = _record(tone_rad=0.0)
     assert integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags).spectrum.tones is None
