@@ -26,6 +26,24 @@ def test_robustness_table_gives_predicted_sigma_and_the_yaw_split():
     assert "0.364 × missed yaw" in text and "0.1300 px RMS" in text
 
 
+def test_rows_say_which_other_criteria_they_miss():
+    """Predicted σ within × 1.5 of the actual RMS (either way) and 95 % of the clear lines restored."""
+    from reports.bench import unmet_criteria
+
+    row = {"actual_over_predicted": {"roll": 1.44, "pitch": 1.86}, "coverage_of_clear_lines": {"roll": 0.996,
+                                                                                               "pitch": 0.93}}
+    assert unmet_criteria(row) == ["σ pitch × 1.86", "clear lines pitch 93.0 %"]
+    assert unmet_criteria({"actual_over_predicted": {"roll": 0.25, "pitch": 0.9},
+                           "coverage_of_clear_lines": {"roll": float("nan")}}) == ["σ roll × 0.25"]
+    assert unmet_criteria({"actual_over_predicted": {"roll": 0.67, "pitch": 1.5}}) == []
+    ok = {"scenario": "damped_chirp", "errors": {a: {"rms_px": 0.03, "p997_px": 0.1, "knowledge_rms_px": 1.2}
+                                                 for a in ("roll", "pitch")},
+          "coverage": {"roll": 0.99, "pitch": 0.99}, "passed": True, "requirement_rms_px": 0.05,
+          "unobservable_rms_px": {"roll": 0.001, "pitch": 0.002}, "floor_rms_px": {"roll": 0.01, "pitch": 0.02},
+          "unmet": ["σ pitch × 1.86"]}
+    assert "PASS; not met: σ pitch × 1.86" in "\n".join(_format_robustness({"rows": [ok], "lines": None}))
+
+
 def test_regression_table_counts_and_verdicts():
     from reports.bench import _format_regression
 
