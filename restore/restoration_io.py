@@ -182,6 +182,8 @@ def _integration_variables(res: RestorationResult) -> tuple[dict, dict]:
             if rec.spectrum.tones is not None:  # the blind-frequency tone found through the lags
                 attrs.update(blind_tone_hz=np.asarray(rec.spectrum.tones[0], dtype=np.float64),
                              blind_tone_prior_sd_rad=float(rec.spectrum.tones[1]))
+                if len(rec.spectrum.tones) > 2:
+                    attrs["blind_tone_order"] = int(rec.spectrum.tones[2])
             data[f"prior_noise_std_{a}"] = ("pair", nstd, attrs)
     return data, coords
 
@@ -275,6 +277,8 @@ def _records_from(ds, info: dict) -> dict:
             if "blind_tone_hz" in at:
                 spec.tones = ([float(x) for x in np.atleast_1d(at["blind_tone_hz"])],
                               float(at["blind_tone_prior_sd_rad"]))
+                if "blind_tone_order" in at:
+                    spec.tones += (int(at["blind_tone_order"]),)
         out[a] = IntegrationRecord(
             axis=a, pairs=list(meta["pairs"]), diffs=_values(ds, f"integrated_diff_{a}")[idx],
             sigmas=_values(ds, f"integrated_sigma_{a}")[idx], taus=_values(ds, f"integrated_tau_{a}")[idx],

@@ -336,13 +336,13 @@ def test_a_blind_frequency_tone_round_trips_through_the_file(tiny_restored, tmp_
     res = copy.deepcopy(res)
     rec = res.integration["pitch"]
     assert rec.spectrum.tones is None
-    rec.spectrum.tones = ([135.1351], 3.0e-6)
+    rec.spectrum.tones = ([135.1351], 3.0e-6, 2)
     path = tmp_path / "restoration.nc"
     restoration_dataset(res).to_netcdf(path)
     back = result_from_dataset(xr.load_dataset(path), path)
-    assert back.integration["pitch"].spectrum.tones == ([135.1351], 3.0e-6)
+    assert back.integration["pitch"].spectrum.tones == ([135.1351], 3.0e-6, 2)
     assert back.integration["roll"].spectrum.tones is None
-    assert back.integration["pitch"].frozen_options()["tones"] == ([135.1351], 3.0e-6)
+    assert back.integration["pitch"].frozen_options()["tones"] == ([135.1351], 3.0e-6, 2)
 
 
 def test_every_restored_line_has_a_predicted_sigma_and_flagged_lines_are_not_restored(tiny_restored):

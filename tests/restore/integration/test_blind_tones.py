@@ -67,6 +67,37 @@ def test_a_tone_on_the_common_blind_frequency_is_found_through_the_lags_and_rest
     assert with_tone < 0.25 * without
 
 
+def test_a_drifting_tone_is_followed_by_the_polynomial_modulation():
+    """A line whose frequency drifts by 0.6 Hz over the record on the blind frequency: the tone with a quadratic
+    amplitude and phase (the default) restores it better than a pure one."""
+    from restore.axis_integration import PriorSpectrum
+    from restore.integration.wiener import blind_tones, integrate_wiener
+
+    rng = np.random.default_rng(7)
+    n = 4000
+    t = np.arange(n) * DT
+
+    def theta(x):
+        return _cmg(x) + 1.2e-6 * np.cos(2 * np.pi * (BLIND_HZ - 0.3) * x + np.pi * 0.6 / 1.6 * x ** 2)
+
+    diffs, lags = [], []
+    for tau in TAUS:
+        lag = (_cmg(t + tau) - _cmg(t)) / IFOV * DT
+        diffs.append(theta(t + tau + lag) - theta(t) + 0.08 * IFOV * rng.standard_normal(n))
+        lags.append(lag)
+    prior = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags).spectrum
+    assert isinstance(prior, PriorSpectrum)
+    errs = {}
+    for order in (0, 2):
+        tones = blind_tones(diffs, TAUS, DT, psd=(prior.freq, prior.psd), noise_std=prior.noise_std, lags=lags,
+                            order=order)
+        assert tones is not None and tones[2] == order
+        est = integrate_wiener(diffs, TAUS, DT, psd=(prior.freq, prior.psd), noise_std=prior.noise_std, lags=lags,
+                               tones=tones)
+        errs[order] = _error_px(est, theta(t))
+    assert errs[2] < 0.7 * errs[0]
+
+
 def test_one_tone_in_the_data_one_tone_found_when_more_are_allowed():
     from restore.integration.wiener import blind_tones
 
