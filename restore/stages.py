@@ -449,8 +449,8 @@ def differential_spikes(pair: PairData, differentials: PairDifferentials, increm
     for k, a in enumerate(AXES):
         if a not in increments:
             continue
-        pred = predicted_differential(np.nan_to_num(increments[a]), differentials.tau_s, line_period_s,
-                                      differentials.lag_s)
+        # NaN where the increment is unknown (long gaps): no residual there, rather than one against zeros
+        pred = predicted_differential(increments[a], differentials.tau_s, line_period_s, differentials.lag_s)
         mask = spikes(pair.synthesis.diff[:, k] - pred, n_sigma=settings.despike_sigma)
         if mask.any():
             out[a] = mask

@@ -384,7 +384,9 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         Sinusoids [Hz] on frequencies every pair is blind to, estimated with
         the field (prior ``N(0, sd²)`` on each coefficient, rad; cos and sin
         times a polynomial of degree ``order`` in time, 0 by default): there
-        the differentials see them only through the lags (:func:`blind_tones`).
+        the differentials see them only through the lags (:func:`blind_tones`);
+        ignored without lags (differentials at the nominal delays: a frozen
+        rerun on simulated ones).
         The estimate returned includes them; ``WienerResult.tones`` holds
         their (cos, sin) coefficients.
     return_details : bool, keyword-only
@@ -427,6 +429,8 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
     max_lag = 0.0 if lag_arr is None else max(float(np.max(np.abs(x))) for x in lag_arr) + 2 * dt
     m = _grid(n, taus, dt, check_positive("pad_fraction", pad_fraction, allow_zero=True), max_lag)
     lag_ops = None if lag_arr is None else [lag_interpolation(x / dt, m) for x in lag_arr]
+    if lag_arr is None:
+        tones = None  # without lags a tone on a common blind frequency leaves nothing to estimate it from
     opts = dict(spectrum_options or {})
     spec: SpectralEstimate = estimate_spectrum(D, taus, dt, n_fft=m, noise_std=noise_std, **opts)
     passes = 0 if psd is not None else int(refine)
