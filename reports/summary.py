@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from . import report_data as D
 
 __all__ = ["run_summary"]
@@ -22,6 +24,21 @@ def _attitude_errors(run) -> dict:
     from .metrics import attitude_errors
 
     return attitude_errors(run.restoration, run.truth)
+
+
+def blind_tone_line(restoration, axes) -> str | None:
+    """The line saying which axes had a tone on the pairs' common blind frequency, found through the lags
+    (``blind_tone_hz`` of ``prior_noise_std_<axis>`` in restoration.nc), or None."""
+    found = []
+    for a in axes:
+        v = restoration.variables.get(f"prior_noise_std_{a}") if restoration is not None else None
+        if v is not None and "blind_tone_hz" in v.attrs:
+            hz = ", ".join(f"{float(f):.2f}" for f in np.atleast_1d(v.attrs["blind_tone_hz"]))
+            found.append(f"{a} {hz} Hz")
+    if not found:
+        return None
+    return ("  a line on the pairs' common blind frequency, seen through the per-line lags, restored: "
+            + "; ".join(found))
 
 
 def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -> str:
@@ -73,6 +90,9 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
             lines.append("  absolute (mean kept), anchored on the star tracker: " + ", ".join(
                 f"{a} {errs[a]['absolute_rms_px']:.3f} px (knowledge {errs[a].get('knowledge_absolute_rms_px', float('nan')):.3f})"
                 for a in axes_r if a in errs and a != "yaw"))
+    tone = blind_tone_line(run.restoration, axes_r)
+    if tone:
+        lines.append(tone)
     verdict = hd.get("verdict") or ""
     if hd.get("passed") is True:
         lines.append(f"requirement: {verdict}")
