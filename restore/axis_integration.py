@@ -137,7 +137,7 @@ def _with_blind_tone(res, prior, spec, diffs, measured, taus, dt, opts, data, la
     (:func:`restore.integration.wiener.blind_tones`), its prior estimated again without the tone's
     sidebands (the first estimate took them for attitude); (res, prior) unchanged otherwise."""
     tones = blind_tones(measured, taus, dt, psd=(prior.freq, prior.psd), noise_std=prior.noise_std,
-                        weights=data.get("weights"), lags=lags)
+                        weights=data.get("weights"), lags=lags, base_objective=getattr(res, "objective", None))
     if tones is None:
         return res, prior
     fixed = spec.frozen_options(opts, prior)

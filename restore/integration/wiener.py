@@ -494,7 +494,8 @@ def common_blind_frequencies(taus, dt: float, record_s: float, top_hz: float) ->
 
 
 def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: float = 1e-6,
-                maxiter: int = 300, false_alarm: float = 1e-8, max_tones: int = 1, order: int = 2):
+                maxiter: int = 300, false_alarm: float = 1e-8, max_tones: int = 1, order: int = 2,
+                base_objective: float | None = None):
     """A tone on a frequency every pair is blind to, seen through the per-line lags: ``(frequencies, sd, order)``
     or None.
 
@@ -516,7 +517,8 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     The tone's cos and sin each carry a polynomial of degree ``order`` in
     time (a line whose amplitude and phase drift over the record, as a CMG
     harmonic's do: on that scenario the roll error 0.050 → 0.029 px with
-    ``order = 2``, none with 1).
+    ``order = 2``, none with 1). ``base_objective``: the objective of the
+    same MAP without a tone, when the caller has solved it already.
     """
     D, valid, taus_a, dt = prepare(diffs, taus, dt)
     n = D.shape[1]
@@ -541,7 +543,7 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     # under no tone, over every candidate tried (Bonferroni)
     threshold = float(chi2.isf(false_alarm / (len(offsets) * centres.size), 2 * (order + 1)))
     chosen: list = []
-    base = solve(None).objective
+    base = solve(None).objective if base_objective is None else float(base_objective)
     for _ in range(int(max_tones)):
         best = None
         for fc in centres:
