@@ -44,7 +44,7 @@ class PriorSpectrum:
     freq: np.ndarray
     psd: np.ndarray
     noise_std: np.ndarray
-    #: a tone on a frequency every pair is blind to, found through the lags: ([Hz], prior sd [rad]) or None
+    #: a tone on a frequency every pair is blind to, found through the lags: ([Hz], prior sd [rad][, order]) or None
     tones: tuple | None = None
 
 
@@ -132,6 +132,13 @@ def periodic_highpass(theta: np.ndarray, grid: np.ndarray, *, dt: float, cutoff_
     return hp
 
 
+def _prior_of(spectrum, n_pairs: int, tones=None) -> PriorSpectrum:
+    """The :class:`PriorSpectrum` of a method's spectral estimate (noise level broadcast to every pair)."""
+    return PriorSpectrum(np.asarray(spectrum.freq, dtype=np.float64), np.asarray(spectrum.psd, dtype=np.float64),
+                         np.broadcast_to(np.asarray(spectrum.noise_std, dtype=np.float64), (n_pairs,)).copy(),
+                         tones=tones)
+
+
 def _with_blind_tone(res, prior, spec, diffs, measured, taus, dt, opts, data, lags, details):
     """The lag-aware MAP again with a tone on a common blind frequency when the lags show one
     (:func:`restore.integration.wiener.blind_tones`), its prior estimated again without the tone's
@@ -142,14 +149,11 @@ def _with_blind_tone(res, prior, spec, diffs, measured, taus, dt, opts, data, la
         return res, prior
     fixed = spec.frozen_options(opts, prior)
     first = integrate(measured, taus, dt, method=spec.name, **fixed, **data, lags=lags, tones=tones, **details)
-    x, _ = tone_columns(tones, len(measured[0]), 0, taus, dt, [np.nan_to_num(np.asarray(lg)) for lg in lags])
+    x, _ = tone_columns(tones, len(measured[0]), taus, dt, [np.nan_to_num(np.asarray(lg)) for lg in lags])
     sidebands = np.einsum("pnq,q->pn", x, first.tones)
     again = integrate([d - sb for d, sb in zip(diffs, sidebands)], taus, dt, method=spec.name, **opts, **data,
                       **details)
-    prior = PriorSpectrum(np.asarray(again.spectrum.freq, dtype=np.float64),
-                          np.asarray(again.spectrum.psd, dtype=np.float64),
-                          np.broadcast_to(np.asarray(again.spectrum.noise_std, dtype=np.float64),
-                                          (len(taus),)).copy(), tones=tones)
+    prior = _prior_of(again.spectrum, len(taus), tones=tones)
     res = integrate(measured, taus, dt, method=spec.name, **spec.frozen_options(opts, prior), **data, lags=lags,
                     **details)
     return res, prior
@@ -210,10 +214,7 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
     details = {"return_details": True} if spec.reports_spectrum else {}
     if spec.reports_spectrum and "psd" not in opts:
         res = integrate(diffs, taus, dt, method=spec.name, **opts, **data, **details)
-        prior = PriorSpectrum(np.asarray(res.spectrum.freq, dtype=np.float64),
-                              np.asarray(res.spectrum.psd, dtype=np.float64),
-                              np.broadcast_to(np.asarray(res.spectrum.noise_std, dtype=np.float64),
-                                              (len(taus),)).copy())
+        prior = _prior_of(res.spectrum, len(taus))
         if exact_lags:
             fixed = spec.frozen_options(opts, prior)
             res = integrate(measured, taus, dt, method=spec.name, **fixed, **data, lags=lags, **details)

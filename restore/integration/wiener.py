@@ -81,7 +81,7 @@ def tone_waves(freqs, n: int, dt: float, order: int = 0, n_record: int | None = 
     return np.concatenate([np.cos(ph) * m[:, None] for m in mods] + [np.sin(ph) * m[:, None] for m in mods], axis=1)
 
 
-def tone_columns(tones, n: int, m: int, taus, dt: float, lags) -> tuple:
+def tone_columns(tones, n: int, taus, dt: float, lags) -> tuple:
     """Differentials (pair, sample, 2q(order+1)) of unit cos / sin tones (times 1, t′, …), with the lags, and
     their prior sd."""
     freqs, sd = np.atleast_1d(np.asarray(tones[0], dtype=np.float64)), float(tones[1])
@@ -445,7 +445,7 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
             S[-1] = 0.0  # keep the operator exactly self-adjoint on real signals
         out = _cg_solve(D, valid, taus, dt, spec.freq, S, spec.noise_std, m, tol=tol, maxiter=maxiter,
                         theta0=grid, rel_weights=rel, lag_ops=lag_ops,
-                        extra=None if tones is None else tone_columns(tones, n, m, taus, dt, lag_arr))
+                        extra=None if tones is None else tone_columns(tones, n, taus, dt, lag_arr))
         full, grid, pred, it, res = out[:5]
         if k == passes:
             break
