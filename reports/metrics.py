@@ -14,7 +14,7 @@ from restore.correction import correct_bands, misregistration, weak_band_misregi
 from simsat.attitude import AttitudeSeries
 from simsat.units import AXES
 
-__all__ = ["error_stats", "attitude_errors", "truth_at", "error_split_by_band", "clear_line_fraction",
+__all__ = ["error_stats", "attitude_errors", "truth_at", "error_split_by_band", "unobservable_split", "clear_line_fraction",
            "clear_line_coverage", "attitude_misregistration", "misregistration_floor"]
 
 
@@ -61,6 +61,61 @@ def error_split_by_band(error, dt: float, freq, band) -> tuple[float, float]:
     frac = float(spec[inside].sum() / max(spec.sum(), 1e-300))
     rms = float(np.sqrt(np.mean(e ** 2)))
     return rms * float(np.sqrt(frac)), rms * float(np.sqrt(1.0 - frac))
+
+
+def unobservable_split(error, dt: float, freq, band, *, predicted_band_rms: float, yaw_seen=None) -> dict:
+    """With truth: the parts of a measured error that no pair can see, and the rest (issue 12's "outside").
+
+    In this order (:mod:`restore.observability` says why each is out of reach):
+
+    1. ``yaw_seen`` (off nadir, pitch: coupling × the yaw the knowledge
+       missed) is subtracted;
+    2. the record's trend (least-squares offset + slope) is subtracted;
+    3. of what is left, the power inside the unobservable ``band`` is taken
+       out — but never more than ``predicted_band_rms`` (the attitude power
+       the product says lies there): error the restoration itself puts in
+       the band is the algorithm's, and stays.
+
+    Parameters
+    ----------
+    error : ndarray (lines,)
+        Restored − true [any angle unit], NaN where not restored.
+    dt : float
+        Line period [s].
+    freq, band : ndarray
+        The unobservable band on a one-sided grid (:func:`error_split_by_band`).
+    predicted_band_rms : float
+        The unobservable RMS the product predicts (same unit as ``error``).
+    yaw_seen : ndarray (lines,) or None
+        The yaw seen as pitch, same unit.
+
+    Returns
+    -------
+    dict
+        ``yaw_rms``, ``trend_rms``, ``band_rms`` (the part taken out),
+        ``detrended_rms`` (after 1 and 2) and ``outside_rms`` (after 3).
+    """
+    from restore.observability import record_trend
+
+    e = np.asarray(error, dtype=np.float64)
+    ok = np.isfinite(e)
+    if ok.sum() < 16:
+        nan = float("nan")
+        return {"yaw_rms": nan, "trend_rms": nan, "band_rms": nan, "detrended_rms": nan, "outside_rms": nan}
+
+    def rms(x):
+        x = x[ok] - np.mean(x[ok])
+        return float(np.sqrt(np.mean(x ** 2)))
+
+    yaw = np.zeros_like(e) if yaw_seen is None else np.asarray(yaw_seen, dtype=np.float64)
+    e1 = e - yaw
+    trend = record_trend(e1)
+    e2 = e1 - trend
+    detrended = rms(e2)
+    inside, _ = error_split_by_band(e2, dt, freq, band)
+    taken = min(inside, float(predicted_band_rms)) if np.isfinite(inside) else 0.0
+    return {"yaw_rms": rms(yaw) if yaw_seen is not None else 0.0, "trend_rms": rms(trend), "band_rms": taken,
+            "detrended_rms": detrended, "outside_rms": float(np.sqrt(max(detrended ** 2 - taken ** 2, 0.0)))}
 
 
 #: a line is "clear" when at least this fraction of its columns sees land that is neither cloud nor water

@@ -21,6 +21,21 @@ estimate's high-pass; below, the AOCS knowledge answers):
 * **floor** — ``√(2 ∫ E df)``: the error of the best linear restoration with
   these pairs, this prior and this noise.
 
+Two more parts of the attitude are out of the images' reach whatever the
+spectrum (with truth, :func:`reports.metrics.unobservable_split` takes them
+out of a measured error):
+
+* **the record's trend** (:func:`record_trend`) — an attitude ``a + b t`` gives
+  every pair the constant differential ``b τ_j``, which a static band-to-band
+  misregistration gives too; the restoration removes each pair's mean, so the
+  offset and the slope over the record are the AOCS knowledge's or the star
+  tracker's (their σ is the anchoring's, :func:`restore.stages.anchoring_sigma`);
+* **yaw seen as pitch** off nadir — the line moves along track by
+  ``c × ψ`` (``c`` = :func:`restore.stages.yaw_pitch_coupling`, ≈ tan of the
+  roll tilt) exactly as by a pitch; across a field of a few hundred pixels
+  the rotation that would tell them apart is a thousandth of a pixel, so the
+  restored pitch is pitch + ``c`` × (the yaw the AOCS knowledge misses).
+
 The prior is what the restoration estimated from the differentials (the
 Wiener method reports it); near common blind frequencies it is an
 extrapolation by construction, which these figures inherit.
@@ -33,7 +48,7 @@ import numpy as np
 
 from .integration.transfer import fused_snr
 
-__all__ = ["Observability", "fused_snr", "observability", "record_observability", "band_power"]
+__all__ = ["Observability", "fused_snr", "observability", "record_observability", "band_power", "record_trend"]
 
 
 @dataclass
@@ -92,3 +107,18 @@ def record_observability(record) -> Observability:
         prior = spectrum_for_lines(list(record.diffs), list(record.taus), record.line_period_s)
     return observability(prior.freq, prior.psd, prior.noise_std, record.taus, record.line_period_s,
                          highpass_hz=record.highpass_hz)
+
+
+def record_trend(series) -> np.ndarray:
+    """The least-squares offset + slope of ``series`` over its finite samples, sampled like it (NaN elsewhere).
+
+    Samples are taken as equally spaced (lines). Fewer than 3 finite samples:
+    their mean (or NaN when none).
+    """
+    y = np.asarray(series, dtype=np.float64)
+    ok = np.isfinite(y)
+    x = np.arange(y.size, dtype=np.float64)
+    if ok.sum() < 3:
+        return np.where(ok, np.mean(y[ok]) if ok.any() else np.nan, np.nan)
+    coef = np.polyfit(x[ok], y[ok], 1)
+    return np.where(ok, np.polyval(coef, x), np.nan)

@@ -53,7 +53,7 @@ from .synthesis import highpass_gain, highpass_nan
 
 __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", "simulated_differentials",
            "fit_residual_rms", "fit_residuals", "band_power", "noise_colour_from_check", "coloured_noise",
-           "knowledge_noise_below"]
+           "knowledge_noise_below", "detrended_rms"]
 
 
 #: the real fit residual may exceed the simulated one by this factor before the noise is inflated
@@ -76,12 +76,38 @@ class PosteriorSigma:
         The factor on each pair's noise power, per frequency of
         ``rfftfreq(lines, Δt)``, that the band-by-band check found (1: as
         modelled); None without the check.
+    detrended_rms : float
+        RMS of the draws' errors once each draw's least-squares line over the
+        record is removed [rad]: the predicted error outside the record's
+        trend, which no pair can see (:func:`restore.observability.trend_unobservable`).
+        NaN when not computed.
     """
 
     sigma: np.ndarray
     noise_scale: float
     samples: int
     noise_colour: np.ndarray | None = None
+    detrended_rms: float = float("nan")
+
+
+def detrended_rms(errors: np.ndarray) -> float:
+    """RMS of error draws (draw, line) once each draw's least-squares line (offset + slope) is removed.
+
+    NaN lines are left out of each draw's fit and of the mean; NaN when no draw
+    has 3 finite lines.
+    """
+    e = np.atleast_2d(np.asarray(errors, dtype=np.float64))
+    x = np.arange(e.shape[1], dtype=np.float64)
+    num, cnt = 0.0, 0
+    for row in e:
+        ok = np.isfinite(row)
+        if ok.sum() < 3:
+            continue
+        coef = np.polyfit(x[ok], row[ok], 1)
+        r = row[ok] - np.polyval(coef, x[ok])
+        num += float(np.sum(r ** 2))
+        cnt += int(ok.sum())
+    return float(np.sqrt(num / cnt)) if cnt else float("nan")
 
 
 def noise_per_line(record) -> np.ndarray:
@@ -332,7 +358,8 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
         num = uniform_filter1d(np.where(ok, var, 0.0), smooth_lines, mode="nearest")
         den = uniform_filter1d(ok.astype(np.float64), smooth_lines, mode="nearest")
         var = np.where(ok, num / np.maximum(den, 1e-12), np.nan)
-    return PosteriorSigma(sigma=np.sqrt(var), noise_scale=float(scale), samples=int(samples), noise_colour=colour)
+    return PosteriorSigma(sigma=np.sqrt(var), noise_scale=float(scale), samples=int(samples), noise_colour=colour,
+                          detrended_rms=detrended_rms(errs))
 
 
 def _prior(record) -> tuple[np.ndarray, np.ndarray]:

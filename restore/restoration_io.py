@@ -227,6 +227,7 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
     for a, sg in res.sigma.items():
         data[f"sigma_{a}"] = ("time", sg, {"units": "rad", "long_name": f"predicted 1-sigma of the restored {a}",
                                            "noise_scale": float(res.noise_scale.get(a, 1.0)),
+                                           "predicted_detrended_rms_rad": float(res.detrended_rms.get(a, np.nan)),
                                            "flag_limit_rad": sigma_limit(sg, res.settings.max_sigma_px,
                                                                          res.pixel_ifov_rad)})
         data[f"flagged_{a}"] = ("time", np.asarray(res.flagged.get(a, np.zeros(sg.size, bool)), dtype=np.int8), {
@@ -319,6 +320,8 @@ def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult
         flagged={a: _values(ds, f"flagged_{a}", np.int8) != 0 for a in AXES if f"flagged_{a}" in ds.variables},
         noise_scale={a: float(ds[f"sigma_{a}"].attrs.get("noise_scale", 1.0)) for a in AXES
                      if f"sigma_{a}" in ds.variables},
+        detrended_rms={a: float(ds[f"sigma_{a}"].attrs.get("predicted_detrended_rms_rad", np.nan)) for a in AXES
+                       if f"sigma_{a}" in ds.variables},
         yaw_pitch_coupling=float(ds.attrs.get("yaw_pitch_coupling", 0.0)))
 
 

@@ -128,6 +128,7 @@ class Restorer:
                                  anchored=anchored, corrected=corrected,
                                  sigma={a: ps.sigma for a, ps in sigma.items()}, flagged=flagged,
                                  noise_scale={a: ps.noise_scale for a, ps in sigma.items()},
+                                 detrended_rms={a: ps.detrended_rms for a, ps in sigma.items()},
                                  yaw_pitch_coupling=stages.yaw_pitch_coupling(pairs))
 
     def _settings_for(self, product: Product) -> RestorationSettings:

@@ -126,6 +126,9 @@ class RestorationResult:
     flagged: dict = field(default_factory=dict)
     #: per restored axis: factor the residual check applied to the modelled noise
     noise_scale: dict = field(default_factory=dict)
+    #: per restored axis: predicted RMS error [rad] once the record's trend (offset and slope, which no
+    #: pair sees) is removed (:attr:`restore.posterior.PosteriorSigma.detrended_rms`)
+    detrended_rms: dict = field(default_factory=dict)
     #: along-track motion of a yaw relative to a pitch (tan of the off-nadir roll): the restored pitch is
     #: pitch + this × the yaw the AOCS knowledge misses (:func:`restore.stages.yaw_pitch_coupling`)
     yaw_pitch_coupling: float = 0.0

@@ -8,13 +8,12 @@ from typing import Callable
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from reports.metrics import YAW_COUPLING_REPORTED, error_split_by_band, error_stats
+from reports.metrics import YAW_COUPLING_REPORTED, error_stats, unobservable_split
 from restore.observability import record_observability
 from simsat.units import AXES
 
 from .headline import attitude_table, restored_axes
 from .loading import RunData
-from .series import longest_finite_run
 
 __all__ = ['integration_record', 'line_lags', 'true_differentials', 'measured_differentials', 'axis_integration', 'error_budget', 'BUDGET_COMPONENTS']
 
@@ -410,18 +409,29 @@ class _AxisBudget:
                 _stats_row("total without it", self.a, total - seen, self.ifov, "total − yaw seen as pitch")]
 
     def band_split_rows(self, total) -> list:
-        """With truth: the measured total error inside and outside the unobservable band (its spectrum split)."""
+        """With truth: what of the measured total no pair can see (the record's trend, the yaw seen as pitch,
+        the blind band up to its predicted power: :func:`reports.metrics.unobservable_split`) and the rest."""
         rec = axis_integration(self.run, self.a)["record"]
         if rec is None:
             return []
         obs = record_observability(rec)
-        inside, outside = error_split_by_band(total, rec.line_period_s, obs.freq, obs.unobservable_band)
-        if not np.isfinite(inside):
+        c = float(self.run.restoration.attrs.get("yaw_pitch_coupling", 0.0))
+        yaw_seen = None
+        if self.a == "pitch" and abs(c) >= YAW_COUPLING_REPORTED and "true_yaw" in self.att:
+            yaw_seen = c * (self.att["true_yaw"] - self.att["knowledge_yaw"])
+        sp = unobservable_split(total, rec.line_period_s, obs.freq, obs.unobservable_band,
+                                predicted_band_rms=rec.unobservable_rms_rad, yaw_seen=yaw_seen)
+        if not np.isfinite(sp["outside_rms"]):
             return []
-        n = longest_finite_run(total)
+        n = int(np.isfinite(total).sum())
         out = []
-        for comp, v in (("total, in the unobservable band", inside), ("total, outside it", outside)):
+        for comp, v, note in (
+                ("total, record trend", sp["trend_rms"],
+                 "offset + slope over the record: constant differentials, like a static band misregistration"),
+                ("total, in the unobservable band", sp["band_rms"],
+                 "the error's power in the band, at most the predicted unobservable power"),
+                ("total, outside the unobservable parts", sp["outside_rms"],
+                 "total − trend − yaw seen as pitch − blind band")):
             out.append({"axis": self.a, "component": comp, "rms_px": v / self.ifov, "p997_px": float("nan"),
-                        "rms_urad": v * 1e6, "p997_urad": float("nan"), "n": int(n.stop - n.start),
-                        "note": "share of the total error's spectrum in / out of the band"})
+                        "rms_urad": v * 1e6, "p997_urad": float("nan"), "n": n, "note": note})
         return out

@@ -19,7 +19,7 @@ def test_robustness_table_gives_predicted_sigma_and_the_yaw_split():
                                                for a, r in (("roll", 0.1), ("pitch", 0.45))},
            "coverage": {"roll": 0.99, "pitch": 0.99}, "passed": False, "requirement_rms_px": 0.05,
            "unobservable_rms_px": {"roll": 0.001, "pitch": 0.002}, "floor_rms_px": {"roll": 0.01, "pitch": 0.02},
-           "predicted_rms_px": {"roll": 0.025, "pitch": 0.03}, "actual_over_predicted": {"roll": 4.0, "pitch": 15.0},
+           "predicted_detrended_rms_px": {"roll": 0.025, "pitch": 0.03}, "actual_over_predicted": {"roll": 4.0, "pitch": 15.0},
            "pitch_without_yaw_coupling_rms_px": 0.13, "yaw_pitch_coupling": 0.364}
     text = "\n".join(_format_robustness({"rows": [row], "lines": None}))
     assert "0.025/0.030" in text and "4.00/15.00" in text
@@ -56,3 +56,27 @@ def test_regression_table_counts_and_verdicts():
     assert "1 of 3 scenarios meet their requirement" in text
     assert "phr_cmg" in text and "PASS" in text and "stress_off_nadir" in text and "FAIL" in text
     assert "broken" in text and "failed: ScenarioError: x" in text
+
+
+def test_axis_verdict_follows_the_done_when():
+    """Outright within the requirement; otherwise only once a non-negligible unobservable part is removed."""
+    from reports.bench import axis_verdict
+
+    assert axis_verdict(0.04, 0.04, 0.05) == "pass"
+    assert axis_verdict(0.456, 0.043, 0.05) == "pass outside"         # off nadir: the yaw seen as pitch
+    assert axis_verdict(0.0546, 0.054, 0.05) == "fail"                # outside the requirement too
+    assert axis_verdict(0.0503, 0.0499, 0.05) == "fail"               # 0.006 px "unobservable": negligible
+    assert axis_verdict(0.06, float("nan"), 0.05) == "fail"
+
+
+def test_a_row_passing_only_outside_the_unobservable_part_says_so():
+    row = {"scenario": "real_aocs", "errors": {a: {"rms_px": r, "p997_px": 3 * r, "knowledge_rms_px": 0.7}
+                                               for a, r in (("roll", 0.028), ("pitch", 0.0996))},
+           "coverage": {"roll": 0.99, "pitch": 0.99}, "passed": True, "passed_outright": False,
+           "requirement_rms_px": 0.05, "unobservable_rms_px": {"roll": 0.001, "pitch": 0.002},
+           "floor_rms_px": {"roll": 0.01, "pitch": 0.02},
+           "unobservable_measured_px": {"roll": {"yaw_rms": 0.0, "trend_rms": 0.0138, "band_rms": 0.0009},
+                                        "pitch": {"yaw_rms": 0.0, "trend_rms": 0.0958, "band_rms": 0.0019}}}
+    text = "\n".join(_format_robustness({"rows": [row], "lines": None}))
+    assert "PASS outside the unobservable part" in text
+    assert "pitch: trend 0.096, band 0.002" in text

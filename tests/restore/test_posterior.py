@@ -5,6 +5,7 @@ import pytest
 from restore.axis_integration import PriorSpectrum
 from restore.observability import observability
 from restore.posterior import (
+    detrended_rms,
     fit_residual_rms,
     knowledge_noise_below,
     noise_per_line,
@@ -93,6 +94,19 @@ def test_sigma_is_the_spread_of_actual_errors_over_independent_records():
         errs.append(e - np.nanmean(e))
     actual = np.sqrt(np.nanmean(np.array(errs) ** 2))
     assert actual == pytest.approx(np.sqrt(np.nanmean(ps.sigma ** 2)), rel=0.15)
+    # and without each record's least-squares line (what no pair sees), the predicted detrended RMS
+    assert detrended_rms(np.array(errs)) == pytest.approx(ps.detrended_rms, rel=0.15)
+    assert ps.detrended_rms < np.sqrt(np.nanmean(ps.sigma ** 2))
+
+
+def test_detrended_rms_removes_each_draws_line():
+    rng = np.random.default_rng(0)
+    x = np.arange(3000)
+    noise = rng.standard_normal((4, 3000)) * 0.1
+    draws = noise + rng.standard_normal((4, 1)) * 5 + rng.standard_normal((4, 1)) * 1e-2 * x
+    draws[1, 200:300] = np.nan
+    assert detrended_rms(draws) == pytest.approx(0.1, rel=0.03)
+    assert np.isnan(detrended_rms(np.full((2, 2), np.nan)))
 
 
 def test_sigma_rises_on_a_short_island_between_gaps():
