@@ -20,9 +20,7 @@ from reports.metrics import (
     clear_line_fraction,
     attitude_misregistration,
     misregistration_floor,
-    truth_at,
-    unobservable_split,
-    YAW_COUPLING_REPORTED,
+    restoration_unobservable_split,
 )
 from restore.pipeline import restore_run
 from restore.restoration_io import read_restoration
@@ -416,21 +414,8 @@ def _predicted_rms(res, axis: str) -> float:
 
 
 def _unobservable_split(res, run_dir: Path, axis: str) -> dict:
-    """With truth: the axis's error split into what no pair sees and the rest [rad]
-    (:func:`reports.metrics.unobservable_split`: yaw seen as pitch, the record's trend, the blind band)."""
-    from restore.observability import record_observability
-
-    rec = res.integration.get(axis)
-    if rec is None:
-        return {}
-    obs = record_observability(rec)
-    truth = read_truth(run_dir)
-    err = res.restored[axis] - truth_at(truth, axis, res.time)
-    yaw_seen = None
-    if axis == "pitch" and abs(res.yaw_pitch_coupling) >= YAW_COUPLING_REPORTED:
-        yaw_seen = res.yaw_pitch_coupling * (truth_at(truth, "yaw", res.time) - res.knowledge["yaw"])
-    return unobservable_split(err, rec.line_period_s, obs.freq, obs.unobservable_band,
-                              predicted_band_rms=obs.unobservable_rms_rad, yaw_seen=yaw_seen)
+    """With truth: the axis's error split into what no pair sees and the rest [rad]."""
+    return restoration_unobservable_split(res, read_truth(run_dir), axis)
 
 
 #: an axis's unobservable part is negligible below this fraction of the requirement: it must then pass outright
@@ -510,9 +495,10 @@ def bench_robustness(*, lines: int | None = None) -> dict:
             row["clear_lines"] = float(np.mean(clear >= CLEAR_LINE_MIN_FRACTION)) if known else float("nan")
             row["coverage_of_clear_lines"] = {a: clear_line_coverage(res.restored[a], clear) if known
                                               else float("nan") for a in axes}
-            if "rms_px_without_yaw_coupling" in e["errors"].get("pitch", {}):
-                row["pitch_without_yaw_coupling_rms_px"] = e["errors"]["pitch"]["rms_px_without_yaw_coupling"]
-                row["yaw_pitch_coupling"] = e["errors"]["pitch"]["yaw_pitch_coupling"]
+            coupled = [a for a in axes if "rms_px_without_yaw_coupling" in e["errors"].get(a, {})]
+            if coupled:
+                row["without_yaw_coupling_rms_px"] = {a: e["errors"][a]["rms_px_without_yaw_coupling"] for a in coupled}
+                row["yaw_coupling"] = {a: e["errors"][a]["yaw_coupling"] for a in coupled}
             row["unmet"] = unmet_criteria(row)
         except Exception as ex:  # one scenario failing must not sink the suite: say why in its row
             row["error"] = f"{type(ex).__name__}: {ex}"
@@ -558,11 +544,11 @@ def _format_robustness(r: dict) -> list:
                  for a in ("roll", "pitch") if a in um and any(v >= 0.001 for v in um[a].values())]
         if parts:
             out.append(f"  {'':24s} measured unobservable parts (px RMS) — " + "; ".join(parts))
-        if "pitch_without_yaw_coupling_rms_px" in row:
-            out.append(f"  {'':24s} pitch without the yaw seen as pitch ({row['yaw_pitch_coupling']:.3f} × missed yaw): "
-                       f"{row['pitch_without_yaw_coupling_rms_px']:.4f} px RMS")
-    out.append("  * predicted σ and actual / predicted without the record's trend and the yaw seen as pitch; "
-               "'outside it': the error without the record's trend, the yaw seen as pitch and (up to its predicted "
+        for a, v in row.get("without_yaw_coupling_rms_px", {}).items():
+            out.append(f"  {'':24s} {a} without the yaw seen as {a} ({row['yaw_coupling'][a]:.3f} × missed yaw): "
+                       f"{v:.4f} px RMS")
+    out.append("  * predicted σ and actual / predicted without the record's trend and the yaw seen as roll or pitch; "
+               "'outside it': the error without the record's trend, the yaw seen as roll or pitch and (up to its predicted "
                "power) the blind band")
     return out
 

@@ -14,7 +14,8 @@ from restore.correction import correct_bands, misregistration, weak_band_misregi
 from simsat.attitude import AttitudeSeries
 from simsat.units import AXES
 
-__all__ = ["error_stats", "attitude_errors", "truth_at", "error_split_by_band", "unobservable_split", "clear_line_fraction",
+__all__ = ["error_stats", "attitude_errors", "truth_at", "error_split_by_band", "unobservable_split",
+           "restoration_unobservable_split", "clear_line_fraction",
            "clear_line_coverage", "attitude_misregistration", "misregistration_floor"]
 
 
@@ -87,7 +88,7 @@ def unobservable_split(error, dt: float, freq, band, *, predicted_band_rms: floa
     predicted_band_rms : float
         The unobservable RMS the product predicts (same unit as ``error``).
     yaw_seen : ndarray (lines,) or None
-        The yaw seen as pitch, same unit.
+        The yaw seen as this axis (pitch off nadir across track, roll along track), same unit.
 
     Returns
     -------
@@ -116,6 +117,28 @@ def unobservable_split(error, dt: float, freq, band, *, predicted_band_rms: floa
     taken = min(inside, float(predicted_band_rms)) if np.isfinite(inside) else 0.0
     return {"yaw_rms": rms(yaw) if yaw_seen is not None else 0.0, "trend_rms": rms(trend), "band_rms": taken,
             "detrended_rms": detrended, "outside_rms": float(np.sqrt(max(detrended ** 2 - taken ** 2, 0.0)))}
+
+
+def restoration_unobservable_split(res, truth, axis: str) -> dict:
+    """:func:`unobservable_split` of a restored axis against truth [rad]; empty when the axis was not integrated.
+
+    ``res``: a :class:`restore.result.RestorationResult`; ``truth``: truth.nc
+    (``time``, ``roll``, ``pitch``, ``yaw``). Off nadir the yaw seen as pitch
+    (roll, when tilted along track) is ``coupling × (true − knowledge yaw)``.
+    """
+    from restore.observability import record_observability
+
+    rec = res.integration.get(axis)
+    if rec is None:
+        return {}
+    obs = record_observability(rec)
+    err = res.restored[axis] - truth_at(truth, axis, res.time)
+    yaw_seen = None
+    c = res.yaw_coupling(axis)
+    if abs(c) >= YAW_COUPLING_REPORTED:
+        yaw_seen = c * (truth_at(truth, "yaw", res.time) - res.knowledge["yaw"])
+    return unobservable_split(err, rec.line_period_s, obs.freq, obs.unobservable_band,
+                              predicted_band_rms=obs.unobservable_rms_rad, yaw_seen=yaw_seen)
 
 
 #: a line is "clear" when at least this fraction of its columns sees land that is neither cloud nor water
@@ -162,8 +185,10 @@ def truth_at(truth, axis: str, t) -> np.ndarray:
                      np.asarray(truth[axis].values))
 
 
-#: pitch errors are also given without the yaw seen as pitch when |yaw_pitch_coupling| exceeds this
+#: pitch (roll) errors are also given without the yaw seen as pitch (roll) when |coupling| exceeds this
 YAW_COUPLING_REPORTED = 0.02
+#: restoration.nc's attribute holding each axis's yaw coupling (:func:`restore.stages.yaw_coupling`)
+YAW_COUPLING_ATTRS = {"pitch": "yaw_pitch_coupling", "roll": "yaw_roll_coupling"}
 
 
 def attitude_errors(restoration, truth, *, axes=AXES) -> dict:
@@ -196,13 +221,14 @@ def attitude_errors(restoration, truth, *, axes=AXES) -> dict:
         if kn is not None:
             k_abs = (kn - tru)[mask]
             s["knowledge_absolute_rms_px"] = float(np.sqrt(np.mean(k_abs ** 2)) / ifov) if k_abs.size else float("nan")
-        c = float(restoration.attrs.get("yaw_pitch_coupling", 0.0))
-        if a == "pitch" and abs(c) >= YAW_COUPLING_REPORTED and "knowledge_yaw" in restoration:
-            # off nadir the images see pitch + c × (yaw the knowledge misses): the error without that part
+        c = float(restoration.attrs.get(YAW_COUPLING_ATTRS.get(a, ""), 0.0))
+        if abs(c) >= YAW_COUPLING_REPORTED and "knowledge_yaw" in restoration:
+            # off nadir the images see pitch (roll, tilted along track) + c × (yaw the knowledge misses):
+            # the error without that part
             missed = truth_at(truth, "yaw", t) - np.asarray(restoration["knowledge_yaw"].values, dtype=np.float64)
             w = error_stats(est - tru - c * missed, ifov_rad=ifov)
             s["rms_px_without_yaw_coupling"], s["p997_px_without_yaw_coupling"] = w["rms_px"], w["p997_px"]
-            s["yaw_pitch_coupling"] = c
+            s["yaw_coupling"] = c
         out[a] = s
     return out
 

@@ -41,6 +41,41 @@ def blind_tone_line(restoration, axes) -> str | None:
             + "; ".join(found))
 
 
+#: the terminal names the error outside the unobservable parts when they take at least this much off an axis [px]
+UNOBSERVABLE_SHOWN_PX = 0.005
+
+
+def unobservable_line(run, axes) -> str:
+    """With truth: the restored error without what no pair sees, when that is material on some axis; else "".
+
+    The record's trend (constant differentials), the yaw seen as pitch (roll)
+    off nadir across (along) track and the blind band up to its predicted power
+    (:func:`reports.metrics.restoration_unobservable_split`).
+    """
+    from restore.restoration_io import result_from_dataset
+
+    from .metrics import error_stats, restoration_unobservable_split, truth_at
+
+    res = result_from_dataset(run.restoration)
+    px = res.pixel_ifov_rad
+    parts, material = [], False
+    for a in axes:
+        if a == "yaw":
+            continue
+        sp = restoration_unobservable_split(res, run.truth, a)
+        if not sp or not np.isfinite(sp["outside_rms"]):
+            continue
+        total = error_stats(res.restored[a] - truth_at(run.truth, a, res.time), ifov_rad=px)["rms_px"]
+        out = sp["outside_rms"] / px
+        material |= total - out >= UNOBSERVABLE_SHOWN_PX
+        named = [f"{k} {sp[key] / px:.3f}" for key, k in (("trend_rms", "trend"), ("yaw_rms", f"yaw seen as {a}"),
+                                                          ("band_rms", "blind band")) if sp[key] / px >= 0.001]
+        parts.append(f"{a} {out:.3f} px" + (f" ({', '.join(named)} taken out)" if named else ""))
+    if not material:
+        return ""
+    return "  without what no pair sees (record trend, yaw seen as roll or pitch, blind band): " + "; ".join(parts)
+
+
 def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -> str:
     """A short text summary of a restored run.
 
@@ -85,6 +120,9 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
                          f"{_fmt(d.get('knowledge_rms_' + key)):>9s}{_fmt(d.get('knowledge_p997_' + key)):>9s}  "
                          f"{d.get('coverage', float('nan')) * 100:8.1f}%")
         lines.append("  (error = estimate − truth, mean removed: the constant is unobservable from images)")
+        outside = unobservable_line(run, axes_r)
+        if outside:
+            lines.append(outside)
         if int(run.restoration.attrs.get("anchored_on_star_tracker", 0)):
             errs = _attitude_errors(run)
             lines.append("  absolute (mean kept), anchored on the star tracker: " + ", ".join(

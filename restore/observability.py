@@ -34,7 +34,9 @@ out of a measured error):
   ``c × ψ`` (``c`` = :func:`restore.stages.yaw_pitch_coupling`, ≈ tan of the
   roll tilt) exactly as by a pitch; across a field of a few hundred pixels
   the rotation that would tell them apart is a thousandth of a pixel, so the
-  restored pitch is pitch + ``c`` × (the yaw the AOCS knowledge misses).
+  restored pitch is pitch + ``c`` × (the yaw the AOCS knowledge misses). Tilted along
+  track by θ₀ the line looks ahead and a yaw sweeps it across track: the same with
+  roll, ``c ≈ sin θ₀`` (:func:`restore.stages.yaw_coupling`).
 
 The prior is what the restoration estimated from the differentials (the
 Wiener method reports it); near common blind frequencies it is an

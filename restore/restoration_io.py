@@ -217,6 +217,7 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
              "misregistration": json.dumps(res.misregistration, sort_keys=True),
              "anchored_on_star_tracker": int(res.anchored),
              "yaw_pitch_coupling": float(res.yaw_pitch_coupling),
+             "yaw_roll_coupling": float(res.yaw_roll_coupling),
              "integration": json.dumps({a: {"pairs": rec.pairs, "method": rec.method, "options": rec.options,
                                             "highpass_hz": rec.highpass_hz, "line_period_s": rec.line_period_s,
                                             "unobservable_rms_rad": rec.unobservable_rms_rad,
@@ -322,7 +323,8 @@ def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult
                      if f"sigma_{a}" in ds.variables},
         detrended_rms={a: float(ds[f"sigma_{a}"].attrs.get("predicted_detrended_rms_rad", np.nan)) for a in AXES
                        if f"sigma_{a}" in ds.variables},
-        yaw_pitch_coupling=float(ds.attrs.get("yaw_pitch_coupling", 0.0)))
+        yaw_pitch_coupling=float(ds.attrs.get("yaw_pitch_coupling", 0.0)),
+        yaw_roll_coupling=float(ds.attrs.get("yaw_roll_coupling", 0.0)))
 
 
 def read_restoration(path: str | Path, *, product_time: np.ndarray | None = None) -> RestorationResult:

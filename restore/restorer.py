@@ -129,7 +129,8 @@ class Restorer:
                                  sigma={a: ps.sigma for a, ps in sigma.items()}, flagged=flagged,
                                  noise_scale={a: ps.noise_scale for a, ps in sigma.items()},
                                  detrended_rms={a: ps.detrended_rms for a, ps in sigma.items()},
-                                 yaw_pitch_coupling=stages.yaw_pitch_coupling(pairs))
+                                 yaw_pitch_coupling=stages.yaw_pitch_coupling(pairs),
+                                 yaw_roll_coupling=stages.yaw_coupling(pairs, "roll"))
 
     def _settings_for(self, product: Product) -> RestorationSettings:
         """The settings the product decides: the "auto" high-pass (from the AOCS knowledge's cut-off) and

@@ -132,6 +132,13 @@ class RestorationResult:
     #: along-track motion of a yaw relative to a pitch (tan of the off-nadir roll): the restored pitch is
     #: pitch + this × the yaw the AOCS knowledge misses (:func:`restore.stages.yaw_pitch_coupling`)
     yaw_pitch_coupling: float = 0.0
+    #: across-track motion of a yaw relative to a roll (≈ sin of the along-track tilt): the restored roll is
+    #: roll + this × the yaw the AOCS knowledge misses (:func:`restore.stages.yaw_coupling`)
+    yaw_roll_coupling: float = 0.0
+
+    def yaw_coupling(self, axis: str) -> float:
+        """The yaw seen as ``axis`` per radian of missed yaw (0 for yaw or an axis without one)."""
+        return {"pitch": self.yaw_pitch_coupling, "roll": self.yaw_roll_coupling}.get(axis, 0.0)
 
     def summary(self) -> str:
         """A few lines for the terminal: pairs, matches, coverage, correction, misregistration, speed."""

@@ -39,7 +39,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -616,6 +616,28 @@ def integrate_differentials(axis: str, used: list, differentials: list, previous
 
 
 # --------------------------------------------------------------------------- coupled yaw
+#: the image coordinate (row of the sensitivities) each axis moves: pitch lines, roll columns
+_AXIS_ROW = {"pitch": (0, 1), "roll": (1, 0)}
+
+
+def yaw_coupling(pairs: list, axis: str) -> float:
+    """How much a yaw moves band B along ``axis``'s image direction, relative to the same ``axis`` angle.
+
+    Pitch: ``Σ ∂l/∂ψ / Σ ∂l/∂θ`` (:func:`yaw_pitch_coupling`); roll: ``Σ ∂c/∂ψ / Σ ∂c/∂φ`` — tilted
+    along track by θ₀ the line looks ahead, and a yaw sweeps it across track by tan θ₀ × yaw, the
+    signature of a roll (coupling ≈ sin θ₀: the roll turns about the tilted body axis). Signed: the
+    restored ``axis`` is off by ``coupling × (ψ − ψ_knowledge)``.
+    """
+    row, col = _AXIS_ROW[axis]
+    num = den = 0.0
+    for p in pairs:
+        if p.sens is None or not len(p.sens):
+            continue
+        num += float(np.nansum(p.sens[:, row, 2]))
+        den += float(np.nansum(p.sens[:, row, col]))
+    return num / den if den else 0.0
+
+
 def yaw_pitch_coupling(pairs: list) -> float:
     """How much a yaw moves band B along track, relative to the same pitch: ``Σ ∂l/∂ψ / Σ ∂l/∂θ``.
 
@@ -626,14 +648,10 @@ def yaw_pitch_coupling(pairs: list) -> float:
     ends by a few thousandths of a pixel per µrad), so the restored pitch is
     the along-track line-of-sight motion, pitch + coupling × (yaw the AOCS
     knowledge misses). Signed: the restored pitch is off by ``coupling × (ψ − ψ_knowledge)``.
+    Looking ahead or behind (a pitch tilt), the same happens across track with roll
+    (:func:`yaw_coupling`).
     """
-    num = den = 0.0
-    for p in pairs:
-        if p.sens is None or not len(p.sens):
-            continue
-        num += float(np.nansum(p.sens[:, 0, 2]))
-        den += float(np.nansum(p.sens[:, 0, 1]))
-    return num / den if den else 0.0
+    return yaw_coupling(pairs, "pitch")
 
 
 # --------------------------------------------------------------------------- uncertainty

@@ -8,7 +8,7 @@ from typing import Callable
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from reports.metrics import YAW_COUPLING_REPORTED, error_stats, unobservable_split
+from reports.metrics import YAW_COUPLING_ATTRS, YAW_COUPLING_REPORTED, error_stats, unobservable_split
 from restore.observability import record_observability
 from simsat.units import AXES
 
@@ -396,29 +396,33 @@ class _AxisBudget:
                         "rms_urad": v * 1e6, "p997_urad": float("nan"), "n": 0, "note": note})
         return out
 
+    def _yaw_seen(self):
+        """With truth and a material coupling: (coupling, yaw seen as this axis per line [rad]); else (c, None)."""
+        c = float(self.run.restoration.attrs.get(YAW_COUPLING_ATTRS.get(self.a, ""), 0.0))
+        if abs(c) < YAW_COUPLING_REPORTED or "true_yaw" not in self.att:
+            return c, None
+        return c, c * (self.att["true_yaw"] - self.att["knowledge_yaw"])
+
     def yaw_coupling_rows(self, total) -> list:
-        """Off nadir, with truth: the part of the pitch error that is yaw seen as pitch, and the rest."""
-        c = float(self.run.restoration.attrs.get("yaw_pitch_coupling", 0.0))
-        if self.a != "pitch" or abs(c) < YAW_COUPLING_REPORTED or "true_yaw" not in self.att:
+        """Tilted, with truth: the part of the pitch (roll) error that is yaw seen as pitch (roll), and the rest."""
+        c, yaw_seen = self._yaw_seen()
+        if yaw_seen is None:
             return []
-        missed = self.att["true_yaw"] - self.att["knowledge_yaw"]
-        seen = _centred(np.where(np.isfinite(total), c * missed, np.nan))
-        return [_stats_row("yaw seen as pitch", self.a, seen, self.ifov,
-                           f"{c:.3f} × (true − knowledge yaw): off nadir a yaw moves the line along track like a "
-                           f"pitch; the images cannot tell them apart"),
-                _stats_row("total without it", self.a, total - seen, self.ifov, "total − yaw seen as pitch")]
+        seen = _centred(np.where(np.isfinite(total), yaw_seen, np.nan))
+        how = ("off nadir a yaw moves the line along track like a pitch" if self.a == "pitch" else
+               "tilted along track a yaw sweeps the line across track like a roll")
+        return [_stats_row(f"yaw seen as {self.a}", self.a, seen, self.ifov,
+                           f"{c:.3f} × (true − knowledge yaw): {how}; the images cannot tell them apart"),
+                _stats_row("total without it", self.a, total - seen, self.ifov, f"total − yaw seen as {self.a}")]
 
     def band_split_rows(self, total) -> list:
-        """With truth: what of the measured total no pair can see (the record's trend, the yaw seen as pitch,
+        """With truth: what of the measured total no pair can see (the record's trend, the yaw seen as the axis,
         the blind band up to its predicted power: :func:`reports.metrics.unobservable_split`) and the rest."""
         rec = axis_integration(self.run, self.a)["record"]
         if rec is None:
             return []
         obs = record_observability(rec)
-        c = float(self.run.restoration.attrs.get("yaw_pitch_coupling", 0.0))
-        yaw_seen = None
-        if self.a == "pitch" and abs(c) >= YAW_COUPLING_REPORTED and "true_yaw" in self.att:
-            yaw_seen = c * (self.att["true_yaw"] - self.att["knowledge_yaw"])
+        _, yaw_seen = self._yaw_seen()
         sp = unobservable_split(total, rec.line_period_s, obs.freq, obs.unobservable_band,
                                 predicted_band_rms=rec.unobservable_rms_rad, yaw_seen=yaw_seen)
         if not np.isfinite(sp["outside_rms"]):
@@ -431,7 +435,7 @@ class _AxisBudget:
                 ("total, in the unobservable band", sp["band_rms"],
                  "the error's power in the band, at most the predicted unobservable power"),
                 ("total, outside the unobservable parts", sp["outside_rms"],
-                 "total − trend − yaw seen as pitch − blind band")):
+                 f"total − trend − yaw seen as {self.a} − blind band")):
             out.append({"axis": self.a, "component": comp, "rms_px": v / self.ifov, "p997_px": float("nan"),
                         "rms_urad": v * 1e6, "p997_urad": float("nan"), "n": n, "note": note})
         return out

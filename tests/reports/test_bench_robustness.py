@@ -20,10 +20,10 @@ def test_robustness_table_gives_predicted_sigma_and_the_yaw_split():
            "coverage": {"roll": 0.99, "pitch": 0.99}, "passed": False, "requirement_rms_px": 0.05,
            "unobservable_rms_px": {"roll": 0.001, "pitch": 0.002}, "floor_rms_px": {"roll": 0.01, "pitch": 0.02},
            "predicted_detrended_rms_px": {"roll": 0.025, "pitch": 0.03}, "actual_over_predicted": {"roll": 4.0, "pitch": 15.0},
-           "pitch_without_yaw_coupling_rms_px": 0.13, "yaw_pitch_coupling": 0.364}
+           "without_yaw_coupling_rms_px": {"pitch": 0.13}, "yaw_coupling": {"pitch": 0.364}}
     text = "\n".join(_format_robustness({"rows": [row], "lines": None}))
     assert "0.025/0.030" in text and "4.00/15.00" in text
-    assert "0.364 × missed yaw" in text and "0.1300 px RMS" in text
+    assert "pitch without the yaw seen as pitch (0.364 × missed yaw): 0.1300 px RMS" in text
 
 
 def test_rows_say_which_other_criteria_they_miss():

@@ -569,3 +569,28 @@ def test_a_noisy_aocs_knowledge_lowers_the_auto_highpass(tiny_restored, tmp_path
                        ).settings.highpass_hz == 2.0
     assert restore_run(run, progress=False, overrides={"correct_images": False, "posterior_samples": 0}
                        ).settings.highpass_hz == res0.settings.highpass_hz
+
+
+def test_a_trend_in_the_truth_is_named_as_unobservable_and_leaves_the_rest_unchanged(tiny_restored, tmp_path):
+    """An attitude a + b t gives constant differentials: adding one to the truth moves the total error, but not
+    what the summary and the bench call the error outside the unobservable parts."""
+    from reports import report_data as D
+    from reports.metrics import restoration_unobservable_split
+    from reports.summary import unobservable_line
+    from restore.restoration_io import read_restoration
+
+    d, _ = tiny_restored
+    run = tmp_path / "run"
+    shutil.copytree(d, run)
+    res = read_restoration(run / "restoration.nc")
+    before = restoration_unobservable_split(res, read_truth(run), "pitch")
+    tr = xr.load_dataset(run / "truth.nc")
+    t = tr["time"].values
+    slope = 0.5 * res.pixel_ifov_rad * (t - t.mean()) / (t.max() - t.min()) * 2   # ±0.5 px over the record
+    tr["pitch"] = tr["pitch"] + slope
+    tr.to_netcdf(run / "truth.nc")
+    after = restoration_unobservable_split(res, read_truth(run), "pitch")
+    px = res.pixel_ifov_rad
+    assert after["trend_rms"] / px > 0.25 and abs(after["outside_rms"] - before["outside_rms"]) / px < 1e-4
+    line = unobservable_line(D.load_run(run), ["roll", "pitch"])
+    assert "without what no pair sees" in line and f"pitch {after['outside_rms'] / px:.3f} px" in line

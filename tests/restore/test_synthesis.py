@@ -177,3 +177,35 @@ def test_yaw_moves_a_rolled_line_along_track_by_sin_roll_times_a_pitch(roll_deg)
                     meas_line_b=lines, meas_col_b=cols, quality=np.ones(cols.size), valid=np.ones(cols.size, bool),
                     sens=sens)
     assert abs(yaw_pitch_coupling([pair])) == pytest.approx(np.tan(roll), abs=1e-3)
+
+
+@pytest.mark.parametrize("pitch_deg", [0.0, 15.0, -25.0])
+def test_yaw_sweeps_a_line_looking_ahead_across_track_by_sin_tilt_times_a_roll(pitch_deg):
+    """Tilted along track by θ₀ (R = Rz(ψ) Ry(θ₀) Rx(φ)) the line's centre looks at (H tan θ₀, 0) from the nadir: a
+    small yaw ψ about the vertical moves it across track by H tan θ₀ · ψ, a small roll φ about the tilted body
+    axis by H φ / cos θ₀ (over a flat plane, to first order): the coupling the restoration records for roll is
+    sin θ₀ in magnitude (0 looking straight down), and the pitch coupling stays 0."""
+    from restore.result import PairData
+    from restore.stages import yaw_coupling
+    from simsat.platform import Platform
+    from simsat.sensor_model import SensorModel, constant_attitude
+    from support.geometry import F, H, TE, V, flat_dem, small_instrument
+
+    inst = small_instrument(pixels=200)
+    tilt = np.radians(pitch_deg)
+    n = 4000
+    along = np.mean([d.along_m for d in inst.detectors])
+    plat = Platform.straight(altitude_m=H, ground_speed_m_s=V, off_nadir_pitch_rad=tilt).centred(
+        t_mid_s=0.5 * (n - 1) * TE, along_angle_rad=np.arctan(along / F))
+    # the line looks up to H tan 25° ≈ 320 km ahead: a coarse flat plane is exact under bilinear interpolation
+    sm = SensorModel(platform=plat, instrument=inst, dem=flat_dem(half_x=400000.0, half_y=20000.0, step=2000.0),
+                     attitude=constant_attitude(0.0, tilt))   # the tilt is the attitude's nominal part
+    cols = np.linspace(0, 199, 21)
+    lines = np.full(cols.size, n / 2)
+    g = sm.direct_location("B1", lines, cols)
+    sens = sm.sensitivities("B0", g)
+    pair = PairData(name="B1/B0", ahead="B1", behind="B0", tau_s=0.0, line_a=lines, col_a=cols,
+                    meas_line_b=lines, meas_col_b=cols, quality=np.ones(cols.size), valid=np.ones(cols.size, bool),
+                    sens=sens)
+    assert abs(yaw_coupling([pair], "roll")) == pytest.approx(abs(np.sin(tilt)), abs=2e-3)
+    assert abs(yaw_coupling([pair], "pitch")) < 2e-3
