@@ -150,33 +150,41 @@ def test_drop_sparse_removes_isolated_samples_in_gappy_stretches():
     np.testing.assert_array_equal(drop_sparse(x, half_window=0), x)
 
 
-@pytest.mark.parametrize("roll_deg", [0.0, 10.0, 20.0, 35.0])
-def test_yaw_moves_a_rolled_line_along_track_by_sin_roll_times_a_pitch(roll_deg):
-    """On a flat plane viewed rolled by φ, a small yaw ψ about the vertical turns the ground point of the line's
-    centre, (0, H tan φ) from the nadir, along track by H tan φ · ψ; a small pitch δ about the cross-track
-    axis moves it by H · δ: the coupling the restoration records is tan φ (0 at nadir)."""
+def _centre_line_pair(*, roll: float = 0.0, pitch: float = 0.0, dem_half_x: float = 20000.0,
+                      dem_step: float = 25.0):
+    """A B1/B0 pair of 21 points across the middle line of a 200-pixel instrument over a flat plane, viewed
+    with the nominal tilt (roll, pitch) [rad] (the attitude's nominal part), with its sensitivities."""
     from restore.result import PairData
-    from restore.stages import yaw_pitch_coupling
     from simsat.platform import Platform
     from simsat.sensor_model import SensorModel, constant_attitude
     from support.geometry import F, H, TE, V, flat_dem, small_instrument
 
     inst = small_instrument(pixels=200)
-    roll = np.radians(roll_deg)
     n = 4000
     along = np.mean([d.along_m for d in inst.detectors])
-    plat = Platform.straight(altitude_m=H, ground_speed_m_s=V, off_nadir_roll_rad=roll).centred(
-        t_mid_s=0.5 * (n - 1) * TE, along_angle_rad=np.arctan(along / F))
-    sm = SensorModel(platform=plat, instrument=inst, dem=flat_dem(half_x=20000.0, half_y=20000.0),
-                     attitude=constant_attitude(roll, 0.0))
+    plat = Platform.straight(altitude_m=H, ground_speed_m_s=V, off_nadir_roll_rad=roll,
+                             off_nadir_pitch_rad=pitch).centred(t_mid_s=0.5 * (n - 1) * TE,
+                                                                along_angle_rad=np.arctan(along / F))
+    sm = SensorModel(platform=plat, instrument=inst,
+                     dem=flat_dem(half_x=dem_half_x, half_y=20000.0, step=dem_step),
+                     attitude=constant_attitude(roll, pitch))
     cols = np.linspace(0, 199, 21)
     lines = np.full(cols.size, n / 2)
-    g = sm.direct_location("B1", lines, cols)
-    sens = sm.sensitivities("B0", g)
-    pair = PairData(name="B1/B0", ahead="B1", behind="B0", tau_s=0.0, line_a=lines, col_a=cols,
+    sens = sm.sensitivities("B0", sm.direct_location("B1", lines, cols))
+    return PairData(name="B1/B0", ahead="B1", behind="B0", tau_s=0.0, line_a=lines, col_a=cols,
                     meas_line_b=lines, meas_col_b=cols, quality=np.ones(cols.size), valid=np.ones(cols.size, bool),
                     sens=sens)
-    assert abs(yaw_pitch_coupling([pair])) == pytest.approx(np.tan(roll), abs=1e-3)
+
+
+@pytest.mark.parametrize("roll_deg", [0.0, 10.0, 20.0, 35.0])
+def test_yaw_moves_a_rolled_line_along_track_by_sin_roll_times_a_pitch(roll_deg):
+    """On a flat plane viewed rolled by φ, a small yaw ψ about the vertical turns the ground point of the line's
+    centre, (0, H tan φ) from the nadir, along track by H tan φ · ψ; a small pitch δ about the cross-track
+    axis moves it by H · δ: the coupling the restoration records is tan φ (0 at nadir)."""
+    from restore.stages import yaw_pitch_coupling
+
+    roll = np.radians(roll_deg)
+    assert abs(yaw_pitch_coupling([_centre_line_pair(roll=roll)])) == pytest.approx(np.tan(roll), abs=1e-3)
 
 
 @pytest.mark.parametrize("pitch_deg", [0.0, 15.0, -25.0])
@@ -185,27 +193,10 @@ def test_yaw_sweeps_a_line_looking_ahead_across_track_by_sin_tilt_times_a_roll(p
     small yaw ψ about the vertical moves it across track by H tan θ₀ · ψ, a small roll φ about the tilted body
     axis by H φ / cos θ₀ (over a flat plane, to first order): the coupling the restoration records for roll is
     sin θ₀ in magnitude (0 looking straight down), and the pitch coupling stays 0."""
-    from restore.result import PairData
     from restore.stages import yaw_coupling
-    from simsat.platform import Platform
-    from simsat.sensor_model import SensorModel, constant_attitude
-    from support.geometry import F, H, TE, V, flat_dem, small_instrument
 
-    inst = small_instrument(pixels=200)
     tilt = np.radians(pitch_deg)
-    n = 4000
-    along = np.mean([d.along_m for d in inst.detectors])
-    plat = Platform.straight(altitude_m=H, ground_speed_m_s=V, off_nadir_pitch_rad=tilt).centred(
-        t_mid_s=0.5 * (n - 1) * TE, along_angle_rad=np.arctan(along / F))
     # the line looks up to H tan 25° ≈ 320 km ahead: a coarse flat plane is exact under bilinear interpolation
-    sm = SensorModel(platform=plat, instrument=inst, dem=flat_dem(half_x=400000.0, half_y=20000.0, step=2000.0),
-                     attitude=constant_attitude(0.0, tilt))   # the tilt is the attitude's nominal part
-    cols = np.linspace(0, 199, 21)
-    lines = np.full(cols.size, n / 2)
-    g = sm.direct_location("B1", lines, cols)
-    sens = sm.sensitivities("B0", g)
-    pair = PairData(name="B1/B0", ahead="B1", behind="B0", tau_s=0.0, line_a=lines, col_a=cols,
-                    meas_line_b=lines, meas_col_b=cols, quality=np.ones(cols.size), valid=np.ones(cols.size, bool),
-                    sens=sens)
+    pair = _centre_line_pair(pitch=tilt, dem_half_x=400000.0, dem_step=2000.0)
     assert abs(yaw_coupling([pair], "roll")) == pytest.approx(abs(np.sin(tilt)), abs=2e-3)
     assert abs(yaw_coupling([pair], "pitch")) < 2e-3
