@@ -141,7 +141,7 @@ MEANING = {
     "restoration.n_sigma": "outlier rejection threshold [σ]",
     "restoration.despike_sigma": "a line whose synthesised differential departs from what the integrated attitude predicts by more than this many robust σ, its neighbours not, is a failed synthesis: dropped and filled (0: off)",
     "restoration.min_points_per_line": "fewest points that make a line's differential",
-    "restoration.highpass_hz": "high-pass of the estimate [Hz]: \"auto\" = 0.2 × the AOCS knowledge cut-off recorded in product.nc (10 Hz → 2 Hz), lowered to where the images' error crosses the knowledge's recorded noise when that is below half of it (a noisy knowledge; needs the predicted σ's measured noise colour)",
+    "restoration.highpass_hz": "high-pass of the estimate [Hz]: \"auto\" = 0.2 × the AOCS knowledge cut-off recorded in product.nc (10 Hz → 2 Hz), lowered to where the images' error crosses the knowledge's recorded noise when that is below a quarter of it (a noisy knowledge; a margin for the images' optimistic low-frequency error model; needs the predicted σ's measured noise colour)",
     "restoration.max_gap_fill_lines": "longest run of lines filled from neighbours; longer gaps are NaN",
     "restoration.compensate_window": "undo the matching window's moving average on the differentials",
     "restoration.method": "integration method (default wiener), or \"auto\": per axis the one of wiener and lsq that best predicts each pair left out from the others (leave-one-pair-out cross-validation on the differentials); options in [restoration.integration] (none with auto)",
