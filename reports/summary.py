@@ -41,6 +41,48 @@ def blind_tone_line(restoration, axes) -> str | None:
             + "; ".join(found))
 
 
+#: below this fraction of restored lines the terminal says which lines were not restored, and why
+COVERAGE_SHOWN = 0.95
+#: at most this many line ranges are named (the longest)
+RANGES_SHOWN = 4
+
+
+def line_ranges(missing) -> list[tuple[int, int]]:
+    """Runs of True in a boolean per line, as (first, last) line numbers, longest first."""
+    m = np.concatenate([[False], np.asarray(missing, dtype=bool), [False]])
+    d = np.diff(m.astype(np.int8))
+    starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
+    order = np.argsort(-(stops - starts), kind="stable")
+    return [(int(starts[k]), int(stops[k])) for k in order]
+
+
+def coverage_line(restoration, axes) -> str:
+    """When fewer than 95 % of the lines are restored: how many, the longest unrestored line ranges, and
+    why (no usable texture; lines flagged for a predicted σ above the limit); else ""."""
+    if restoration is None:
+        return ""
+    axes = [a for a in axes if a != "yaw" and a in restoration]
+    if not axes:
+        return ""
+    missing = np.zeros(restoration.sizes["time"], dtype=bool)
+    flagged = np.zeros_like(missing)
+    for a in axes:
+        missing |= ~np.isfinite(np.asarray(restoration[a].values, dtype=np.float64))
+        if f"flagged_{a}" in restoration:
+            flagged |= np.asarray(restoration[f"flagged_{a}"].values) != 0
+    if 1.0 - missing.mean() >= COVERAGE_SHOWN:
+        return ""
+    ranges = line_ranges(missing)
+    named = ", ".join(f"{a}–{b}" if b > a else f"{a}" for a, b in sorted(ranges[:RANGES_SHOWN]))
+    more = f" and {len(ranges) - RANGES_SHOWN} shorter runs" if len(ranges) > RANGES_SHOWN else ""
+    why = "no usable texture there (cloud, water, flat or dark ground)"
+    n_flag = int(np.count_nonzero(flagged & missing))
+    if n_flag:
+        why += (f"; {n_flag} of these lines were flagged instead, for a predicted σ above restoration.max_sigma_px "
+                f"(short clear islands, gap edges)")
+    return (f"  not restored: {missing.mean() * 100:.1f} % of the lines — lines {named}{more}: {why}")
+
+
 #: the terminal names the error outside the unobservable parts when they take at least this much off an axis [px]
 UNOBSERVABLE_SHOWN_PX = 0.005
 
@@ -128,6 +170,9 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
             lines.append("  absolute (mean kept), anchored on the star tracker: " + ", ".join(
                 f"{a} {errs[a]['absolute_rms_px']:.3f} px (knowledge {errs[a].get('knowledge_absolute_rms_px', float('nan')):.3f})"
                 for a in axes_r if a in errs and a != "yaw"))
+    cov = coverage_line(run.restoration, axes_r)
+    if cov:
+        lines.append(cov)
     tone = blind_tone_line(run.restoration, axes_r)
     if tone:
         lines.append(tone)

@@ -1,0 +1,36 @@
+"""The terminal names the line ranges it did not restore, and why, when they are more than 5 % of the lines."""
+import numpy as np
+import xarray as xr
+
+from reports.summary import coverage_line, line_ranges
+
+
+def test_line_ranges_are_the_runs_longest_first():
+    m = np.zeros(20, bool)
+    m[2:4] = m[10:17] = m[19] = True
+    assert line_ranges(m) == [(10, 16), (2, 3), (19, 19)]
+    assert line_ranges(np.zeros(5, bool)) == []
+
+
+def _restoration(n=1000, gaps=(), flagged=()):
+    v = np.ones(n)
+    f = np.zeros(n, np.int8)
+    for a, b in gaps:
+        v[a:b] = np.nan
+    for a, b in flagged:
+        v[a:b] = np.nan
+        f[a:b] = 1
+    return xr.Dataset({"roll": ("time", v.copy()), "pitch": ("time", v.copy()), "flagged_pitch": ("time", f)})
+
+
+def test_a_cloudy_record_names_its_unrestored_lines_and_why():
+    ds = _restoration(gaps=[(100, 400), (700, 720)], flagged=[(400, 430)])
+    line = coverage_line(ds, ["roll", "pitch"])
+    assert "35.0 % of the lines" in line
+    assert "lines 100–429, 700–719" in line and "no usable texture" in line
+    assert "30 of these lines were flagged" in line
+
+
+def test_a_mostly_restored_record_says_nothing():
+    assert coverage_line(_restoration(gaps=[(0, 40)]), ["roll", "pitch"]) == ""
+    assert coverage_line(None, ["roll"]) == ""
