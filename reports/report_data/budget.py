@@ -8,6 +8,7 @@ from typing import Callable
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from restore.observability import record_trend
 from reports.metrics import YAW_COUPLING_ATTRS, YAW_COUPLING_REPORTED, error_stats, unobservable_split
 from restore.observability import record_observability
 from simsat.units import AXES
@@ -363,6 +364,11 @@ class _AxisBudget:
         th_true = rec.rerun(dperfect)
         remaining = att[f"delta_{a}"] - (self.prev_used if self.prev_used is not None else 0.0)
         eint = _centred(np.where(mask, th_true - remaining, np.nan))
+        anchored = bool(int(self.run.restoration.attrs.get("anchored_on_star_tracker", 0)))
+        if anchored:
+            # the star tracker sets the record's trend after the integration (no pair sees it): the
+            # integration is judged without it, and the anchoring's own error stays in "measurement"
+            eint = _centred(eint - record_trend(eint))
         total = _centred(att[f"restored_{a}"] - att[f"true_{a}"])
         emeas = total - eint
         r_noise = None
@@ -371,11 +377,13 @@ class _AxisBudget:
             r_noise = _stats_row("matching noise", a, en, ifov, "integrate(true + σ·noise) − integrate(true), 1 draw")
             rows.append(r_noise)
             ser["matching noise"] = en
-        r_meas = _stats_row("measurement (noise + model)", a, emeas, ifov, "total − integration")
+        r_meas = _stats_row("measurement (noise + model)", a, emeas, ifov, "total − integration"
+                            + (" (and the star-tracker anchoring's own error)" if anchored else ""))
         if r_noise is not None:
             rows.append(_quad_row("model / synthesis", a, r_meas, r_noise, "√(measurement² − noise²)"))
         rows.append(r_meas)
-        rows.append(_stats_row("integration", a, eint, ifov, "integrate(true differentials) − truth"))
+        rows.append(_stats_row("integration", a, eint, ifov, "integrate(true differentials) − truth"
+                               + (", its trend removed (the star-tracker anchoring sets it)" if anchored else "")))
         rows.append(_stats_row("total (restored − true)", a, total, ifov, "= measurement + integration"))
         rows += self.band_split_rows(total)
         rows += self.yaw_coupling_rows(total)

@@ -693,3 +693,34 @@ def test_true_differentials_at_the_delay_the_images_saw(synth):
         exp = (true_att("pitch", t1) - ks.at(t1)[k]) - (true_att("pitch", t) - ks.at(t)[k])
         ok = np.isfinite(got[j]) & (t1 <= t[-1])
         np.testing.assert_allclose(got[j][ok], exp[ok], atol=2e-10)
+
+
+def test_an_anchored_run_judges_the_integration_without_the_trend_the_star_tracker_sets(synth, tmp_path):
+    """Anchored on a star tracker, the record's trend is set after the integration: the budget's integration row
+    is the exact differentials' integration error less its least-squares line, and the identity total =
+    measurement + integration still holds."""
+    import shutil
+
+    import xarray as xr
+
+    run0, meta, _ = synth
+    run = tmp_path / "anchored"
+    shutil.copytree(run0, run)
+    ds = xr.load_dataset(run / "restoration.nc")
+    ds.attrs["anchored_on_star_tracker"] = 1
+    ds.to_netcdf(run / "restoration.nc")
+    bud = D.error_budget(D.load_run(run), integrate=wiener_integrate)
+    t = meta["t"]
+    for a in ("roll", "pitch"):
+        m = np.isfinite(meta["restoration"][a].values)
+        delta = true_att(a, t) - meta["restoration"][f"knowledge_{a}"].values
+        dtrue = np.where(meta["gap"], np.nan, exact_differentials(a, t))
+        eint = np.where(m, wiener_integrate(list(dtrue), meta["taus"], TE) - delta, np.nan)
+        x = np.arange(eint.size)
+        ok = np.isfinite(eint)
+        eint = np.where(ok, eint - np.polyval(np.polyfit(x[ok], eint[ok], 1), x), np.nan)
+        rows = {r["component"]: r for r in bud["rows"] if r["axis"] == a}
+        assert rows["integration"]["rms_urad"] == pytest.approx(_stats(eint)[0] * 1e6, rel=2e-3)
+        assert "star-tracker anchoring" in rows["integration"]["note"]
+        total = rows["total (restored − true)"]["rms_urad"]
+        assert total == pytest.approx(_stats(meta["restoration"][a].values - true_att(a, t))[0] * 1e6, rel=1e-9)
