@@ -139,6 +139,7 @@ MEANING = {
     "restoration.min_quality": "correlation below which a match is rejected",
     "restoration.axes": "axes fitted by the instant synthesis",
     "restoration.n_sigma": "outlier rejection threshold [σ]",
+    "restoration.transient_factor": "where the fit of the estimated (stationary) prior misses the data by more than this many times its record median over 100 lines — an abrupt onset it cannot follow — and the estimate without prior (least squares) fits them, that estimate is blended in over the window (0: off)",
     "restoration.despike_sigma": "a line whose synthesised differential departs from what the integrated attitude predicts by more than this many robust σ, its neighbours not, is a failed synthesis: dropped and filled (0: off)",
     "restoration.min_points_per_line": "fewest points that make a line's differential",
     "restoration.highpass_hz": "high-pass of the estimate [Hz]: \"auto\" = 0.2 × the AOCS knowledge cut-off recorded in product.nc (10 Hz → 2 Hz), lowered to where the images' error crosses the knowledge's recorded noise when that is below a quarter of it (a noisy knowledge; a margin for the images' optimistic low-frequency error model; needs the predicted σ's measured noise colour)",

@@ -34,7 +34,8 @@ from .integration.methods import IntegrationMethod, integration_method
 from .integration.wiener import blind_tones, tone_columns
 from .synthesis import highpass_nan
 
-__all__ = ["AxisIntegration", "PriorSpectrum", "integrate_axis", "lag_corrected_differentials", "periodic_highpass"]
+__all__ = ["AxisIntegration", "PriorSpectrum", "integrate_axis", "lag_corrected_differentials", "periodic_highpass",
+           "running_misfit", "transient_windows", "explained_windows", "transient_blend"]
 
 
 @dataclass
@@ -159,9 +160,87 @@ def _with_blind_tone(res, prior, spec, diffs, measured, taus, dt, opts, data, la
     return res, prior
 
 
+#: running window of the transient detection [lines]
+TRANSIENT_BLOCK_LINES = 100
+#: a transient's window reaches this many lines beyond the lines that fail the prior (the MAP's estimate
+#: rings ahead of an abrupt onset it cannot fit: on spot5_mirror its error starts 370 lines before)
+TRANSIENT_MARGIN_LINES = 400
+#: the least-squares estimate is blended in over a ramp of this many lines at a window's edges
+TRANSIENT_RAMP_LINES = 50
+#: a candidate window is kept when the least-squares estimate's running misfit stays within this many times the
+#: record's median misfit there (a transient: 0.8-0.9 × on spot5_mirror and damped_chirp; data no estimate
+#: explains — clouds, folds, a poor stretch of texture — 3.3-61 ×)
+TRANSIENT_LSQ_FIT = 2.0
+
+
+def running_misfit(residuals, noise, *, block: int = TRANSIENT_BLOCK_LINES) -> np.ndarray:
+    """The fit's normalised misfit ``(r/σ)²``, averaged over the pairs, then its running median over ``block``
+    lines (NaN where fewer than a quarter of the block's lines are known).
+
+    A median: a transient raises the misfit of most lines of the window; a few
+    failed syntheses (a fold at several pixels of jitter) raise a few lines a
+    lot and leave it alone.
+    """
+    from scipy.ndimage import generic_filter
+
+    z2 = np.asarray(residuals, dtype=np.float64) ** 2 / np.asarray(noise, dtype=np.float64) ** 2
+    ok = np.isfinite(z2)
+    per_line = np.where(ok.any(0), np.where(ok, z2, 0.0).sum(0) / np.maximum(ok.sum(0), 1), np.nan)
+    return generic_filter(per_line, lambda v: np.nanmedian(v) if np.isfinite(v).sum() > v.size // 4 else np.nan,
+                          size=int(block), mode="nearest")
+
+
+def transient_windows(misfit, *, factor: float, margin: int = TRANSIENT_MARGIN_LINES) -> list[list[int]]:
+    """Candidate line windows where a stationary prior fails: the running misfit (:func:`running_misfit`)
+    above ``factor`` times its record median, grown by ``margin`` lines each side, as ``[[first, stop), ...]``.
+
+    Empty with ``factor <= 0`` or nothing standing out.
+    """
+    run = np.asarray(misfit, dtype=np.float64)
+    if not factor > 0 or not np.isfinite(run).any():
+        return []
+    bad = np.isfinite(run) & (run > factor * float(np.nanmedian(run)))
+    if not bad.any():
+        return []
+    n = bad.size
+    grown = np.zeros(n, dtype=bool)
+    for i in np.flatnonzero(bad):
+        grown[max(0, i - margin): min(n, i + margin + 1)] = True
+    edges = np.diff(np.concatenate([[0], grown.astype(np.int8), [0]]))
+    return [[int(a), int(b)] for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+
+
+def explained_windows(windows, misfit_local, baseline: float, *, limit: float) -> list[list[int]]:
+    """The candidate windows where the estimate without prior fits the data: its running misfit nowhere
+    above ``limit × baseline`` inside. A transient the prior could not follow passes; data the model cannot
+    explain either way (clouds, folds, a poorly textured stretch) does not."""
+    m = np.asarray(misfit_local, dtype=np.float64)
+    out = []
+    for a, b in windows:
+        seg = m[int(a):int(b)]
+        if np.isfinite(seg).any() and float(np.nanmax(seg)) <= limit * baseline:
+            out.append([int(a), int(b)])
+    return out
+
+
+def transient_blend(theta, theta_local, windows, *, ramp: int = TRANSIENT_RAMP_LINES) -> np.ndarray:
+    """``theta`` with ``theta_local`` inside ``windows`` ([first, stop) lines), ramped over ``ramp`` lines."""
+    from scipy.ndimage import uniform_filter1d
+
+    th = np.asarray(theta, dtype=np.float64)
+    m = np.zeros(th.size)
+    for a, b in windows:
+        m[int(a):int(b)] = 1.0
+    if ramp > 1:
+        m = uniform_filter1d(m, int(ramp), mode="nearest")
+    loc = np.asarray(theta_local, dtype=np.float64)
+    return np.where(np.isfinite(loc), m * loc + (1.0 - m) * th, th)
+
+
 def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options: dict | None = None,
                    lags=None, sigmas=None, weights=None, highpass_hz: float = 0.0,
-                   psd_ceiling=None, first_stage_gcv: bool = True) -> AxisIntegration:
+                   psd_ceiling=None, first_stage_gcv: bool = True, transient_factor: float = 0.0
+                   ) -> AxisIntegration:
     """Integrate one axis's differentials of every pair (time synchronisation, method, high-pass).
 
     Parameters
@@ -192,6 +271,14 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
         least-squares estimate (it only corrects the lags) picks its
         curvature weight by generalised cross-validation (five sparse
         factorisations); False uses the default weight (one solve).
+    transient_factor : float
+        For a method with an estimated stationary prior: where the fit's
+        misfit exceeds this many times its record median
+        (:func:`transient_windows`: an abrupt onset the prior's average power
+        cannot fit, around which the MAP rings), the least-squares estimate
+        (no prior) is blended in (:func:`transient_blend`); the windows are
+        kept in the options (``transient_lines``) so that a frozen rerun
+        applies the same. 0: off.
 
     Returns
     -------
@@ -199,6 +286,7 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
     """
     spec = integration_method(method)
     opts = dict(options or {})
+    windows = opts.pop("transient_lines", None)
     diffs = [np.asarray(d, dtype=np.float64) for d in diffs]
     taus = [float(t) for t in taus]
     timed = lags is not None and any(np.any(np.asarray(lg) != 0) for lg in lags)
@@ -229,4 +317,38 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
         grid = getattr(res, "theta_grid", None)
         theta = (periodic_highpass(theta, grid, dt=dt, cutoff_hz=highpass_hz) if grid is not None
                  else highpass_nan(theta, dt=dt, cutoff_hz=highpass_hz))
+    local = None
+    if windows is None and spec.reports_spectrum and transient_factor > 0 and prior is not None:
+        misfit = lambda th: _running_misfit_of(th, measured, taus, dt, lags, weights, prior, highpass_hz)  # noqa: E731
+        mw = misfit(theta)
+        windows = transient_windows(mw, factor=transient_factor)
+        if windows:
+            local = _lsq_estimate(measured, taus, dt, lags, sigmas, weights, highpass_hz, first_stage_gcv)
+            windows = explained_windows(windows, misfit(local), float(np.nanmedian(mw)), limit=TRANSIENT_LSQ_FIT)
+    if windows:
+        if local is None:
+            local = _lsq_estimate(measured, taus, dt, lags, sigmas, weights, highpass_hz, first_stage_gcv)
+        theta = transient_blend(theta, local, windows)
+        opts["transient_lines"] = [list(map(int, w)) for w in windows]
     return AxisIntegration(theta=theta, method=spec, options=opts, spectrum=prior)
+
+
+def _lsq_estimate(diffs, taus, dt, lags, sigmas, weights, highpass_hz, first_stage_gcv) -> np.ndarray:
+    """The least-squares estimate (no prior) of the same differentials, high-passed the same way."""
+    return integrate_axis(diffs, taus, dt, method="lsq", lags=lags, sigmas=sigmas, weights=weights,
+                          highpass_hz=highpass_hz, first_stage_gcv=first_stage_gcv).theta
+
+
+def _running_misfit_of(theta, measured, taus, dt, lags, weights, prior, highpass_hz) -> np.ndarray:
+    """:func:`running_misfit` of an estimate against the prior's per-line noise (σ_j over √ relative weight)."""
+    from .posterior import fit_residuals
+
+    d = np.asarray(measured, dtype=np.float64)
+    lg = [np.zeros(d.shape[1]) for _ in taus] if lags is None else lags
+    r = fit_residuals(d, theta, taus, lg, dt, highpass_hz=highpass_hz)
+    sig = np.asarray(prior.noise_std, dtype=np.float64)[:, None] * np.ones(d.shape)
+    if weights is not None:
+        w = np.where(np.isfinite(d), np.asarray(weights, dtype=np.float64), np.nan)
+        w = w / np.nanmean(w, axis=1, keepdims=True)
+        sig = np.where(w > 0, sig / np.sqrt(np.where(w > 0, w, 1.0)), np.nan)
+    return running_misfit(r, sig)

@@ -609,7 +609,7 @@ def integrate_differentials(axis: str, used: list, differentials: list, previous
     res = integrate_axis(diffs, taus, line_period_s, method=method,
                          options=settings.integration_options if selection is None else {},
                          lags=lags, sigmas=sigmas, weights=weights, highpass_hz=settings.highpass_hz,
-                         psd_ceiling=psd_ceiling)
+                         psd_ceiling=psd_ceiling, transient_factor=settings.transient_factor)
     prior = res.spectrum or spectrum_for_lines(diffs, taus, line_period_s)
     obs = observability(prior.freq, prior.psd, prior.noise_std, taus, line_period_s, highpass_hz=settings.highpass_hz)
     return IntegrationRecord(axis=axis, pairs=[p.name for p in used], diffs=np.array(diffs), sigmas=np.array(sigmas),

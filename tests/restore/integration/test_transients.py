@@ -1,0 +1,92 @@
+"""An abrupt onset the stationary prior cannot follow: found by the fit's misfit, restored without the prior."""
+import numpy as np
+
+from restore.integration import methods
+from restore.axis_integration import (explained_windows, integrate_axis, running_misfit, transient_blend,
+                                      transient_windows)
+
+DT = 4e-4
+TAUS = (0.0074, 0.0148, 0.0222)
+IFOV = 4e-6
+N = 4000
+
+
+def _cmg(t):
+    return 0.5e-6 * sum(np.sin(2 * np.pi * f * t + k) for k, f in enumerate((52.7, 58.9, 63.4, 74.1)))
+
+
+def _chirp(t, start=0.15, amplitude=12e-6):
+    """SPOT5's mirror (CNES §2): a 25 Hz oscillation switched on at ``start`` (3 px), falling 5 Hz/s, damped
+    over 0.6 s."""
+    s = np.clip(t - start, 0.0, None)
+    return np.where(t >= start, amplitude * np.exp(-s / 0.6) * np.sin(2 * np.pi * (25.0 * s - 2.5 * s * s)), 0.0)
+
+
+def _record(theta, pitch=None, noise_px=0.08, seed=0):
+    """Differentials of ``theta`` seen at t + τ + λ, the lags λ set by the along-track ``pitch`` (1 px: 1 line)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(N) * DT
+    diffs, lags = [], []
+    for tau in TAUS:
+        lag = np.zeros(N) if pitch is None else (pitch(t + tau) - pitch(t)) / IFOV * DT
+        diffs.append(theta(t + tau + lag) - theta(t) + noise_px * IFOV * rng.standard_normal(N))
+        lags.append(lag)
+    return t, diffs, lags
+
+
+def _rms_px(e):
+    e = e[np.isfinite(e)]
+    return float(np.sqrt(np.mean((e - e.mean()) ** 2))) / IFOV
+
+
+def test_windows_are_the_lines_whose_running_misfit_stands_out_grown_by_the_margin():
+    misfit = np.ones(1000)
+    misfit[400:450] = 9.0
+    assert transient_windows(misfit, factor=4.0, margin=100) == [[300, 550]]
+    assert transient_windows(misfit, factor=10.0, margin=100) == []
+    assert transient_windows(misfit, factor=0.0) == []
+    # kept only where the estimate without prior fits: its misfit within the limit times the baseline
+    local = np.ones(1000)
+    assert explained_windows([[300, 550]], local, 1.0, limit=2.0) == [[300, 550]]
+    local[500] = 5.0
+    assert explained_windows([[300, 550]], local, 1.0, limit=2.0) == []
+
+
+def test_the_running_median_ignores_a_few_failed_lines_but_not_a_misfit_of_most_lines():
+    noise = np.ones((3, 1000))
+    r = np.random.default_rng(1).standard_normal((3, 1000))
+    spikes = r.copy()
+    spikes[:, 500:506] = 30.0                       # six failed lines
+    assert np.nanmax(running_misfit(spikes, noise, block=100)) < 2.0
+    onset = r.copy()
+    onset[:, 500:600] *= 4.0                         # a hundred lines misfit 16× in power
+    assert np.nanmax(running_misfit(onset, noise, block=100)) > 8.0
+
+
+def test_blend_ramps_between_the_estimates():
+    out = transient_blend(np.zeros(400), np.ones(400), [[100, 300]], ramp=20)
+    assert out[0] == 0.0 and out[200] == 1.0 and out[-1] == 0.0 and 0.0 < out[100] < 1.0
+
+
+def test_an_abrupt_onset_is_restored_without_the_prior_that_cannot_follow_it():
+    """A 3 px damped chirp switched on 0.15 s into the record over small CMG lines (SPOT5's mirror, 1 px of it
+    along track setting the lags): the stationary MAP, on its periodic grid, rings ahead of the onset (0.19 px
+    in the first 500 lines); with the transient window the least-squares estimate takes over there and the
+    error falls several-fold. The window is kept in the options: a frozen rerun applies the same."""
+    t, diffs, lags = _record(lambda x: _cmg(x) + _chirp(x), pitch=lambda x: _chirp(x) / 3)
+    truth = _cmg(t) + _chirp(t)
+    plain = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags, transient_factor=0.0)
+    found = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags, transient_factor=4.0)
+    windows = found.options["transient_lines"]
+    assert len(windows) == 1 and windows[0][0] < 0.15 / DT < windows[0][1]
+    e_plain, e_found = _rms_px(plain.theta - truth), _rms_px(found.theta - truth)
+    assert e_found < 0.5 * e_plain, (e_plain, e_found)
+    opts = methods.integration_method("wiener").frozen_options(found.options, found.spectrum)
+    again = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags, options=opts)
+    np.testing.assert_allclose(again.theta, found.theta, atol=1e-3 * IFOV)
+
+
+def test_stationary_lines_find_no_transient():
+    t, diffs, lags = _record(_cmg)
+    res = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags, transient_factor=4.0)
+    assert "transient_lines" not in res.options
