@@ -319,7 +319,9 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
                  else highpass_nan(theta, dt=dt, cutoff_hz=highpass_hz))
     local = None
     if windows is None and spec.reports_spectrum and transient_factor > 0 and prior is not None:
-        misfit = lambda th: _running_misfit_of(th, measured, taus, dt, lags, weights, prior, highpass_hz)  # noqa: E731
+        def misfit(th):
+            return _running_misfit_of(th, measured, taus, dt, lags, weights, prior, highpass_hz)
+
         mw = misfit(theta)
         windows = transient_windows(mw, factor=transient_factor)
         if windows:
