@@ -41,6 +41,28 @@ def blind_tone_line(restoration, axes) -> str | None:
             + "; ".join(found))
 
 
+def transient_line(restoration, axes) -> str | None:
+    """The line windows where a transient the stationary prior could not follow was restored without it
+    (``transient_lines`` in the options of restoration.nc's ``integration`` record), or None."""
+    import json
+
+    if restoration is None:
+        return None
+    try:
+        info = json.loads(str(restoration.attrs.get("integration", "{}")))
+    except ValueError:
+        return None
+    found = []
+    for a in axes:
+        wins = (info.get(a) or {}).get("options", {}).get("transient_lines")
+        if wins:
+            found.append(f"{a} lines " + ", ".join(f"{int(lo)}–{int(hi) - 1}" for lo, hi in wins))
+    if not found:
+        return None
+    return ("  a transient the stationary prior could not follow, restored without it (least squares): "
+            + "; ".join(found))
+
+
 #: below this fraction of restored lines the terminal says which lines were not restored, and why
 COVERAGE_SHOWN = 0.95
 #: at most this many line ranges are named (the longest)
@@ -173,6 +195,9 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
     cov = coverage_line(run.restoration, axes_r)
     if cov:
         lines.append(cov)
+    transient = transient_line(run.restoration, axes_r)
+    if transient:
+        lines.append(transient)
     tone = blind_tone_line(run.restoration, axes_r)
     if tone:
         lines.append(tone)

@@ -34,3 +34,15 @@ def test_a_cloudy_record_names_its_unrestored_lines_and_why():
 def test_a_mostly_restored_record_says_nothing():
     assert coverage_line(_restoration(gaps=[(0, 40)]), ["roll", "pitch"]) == ""
     assert coverage_line(None, ["roll"]) == ""
+
+
+def test_transient_windows_are_named_with_their_axis_and_lines():
+    import json
+
+    from reports.summary import transient_line
+
+    info = {"roll": {"options": {"transient_lines": [[0, 749]]}}, "pitch": {"options": {}}}
+    ds = xr.Dataset(attrs={"integration": json.dumps(info)})
+    assert transient_line(ds, ["roll", "pitch"]).endswith("roll lines 0–748")
+    assert transient_line(xr.Dataset(attrs={"integration": json.dumps({"roll": {"options": {}}})}), ["roll"]) is None
+    assert transient_line(None, ["roll"]) is None
