@@ -237,10 +237,10 @@ def draw_transfer(ax, *, probe: dict | None, measured: dict | None, taus, pair_n
 def draw_budget(ax, rows: list, *, unit: str = "px"):
     """Horizontal bars of RMS and 99.7 % per component, grouped by axis."""
     comps = [c for c in ("uncorrected knowledge", "matching noise", "model / synthesis", "integration",
-                         "total (restored − true)") if any(r["component"] == c for r in rows)]
+                         "star-tracker anchoring", "total (restored − true)") if any(r["component"] == c for r in rows)]
     axes = [a for a in AXES if any(r["axis"] == a for r in rows)]
     colors = {"uncorrected knowledge": C_KNOW, "matching noise": "#56B4E9", "model / synthesis": "#CC79A7",
-              "integration": "#009E73", "total (restored − true)": C_ERR}
+              "integration": "#009E73", "star-tracker anchoring": "#999999", "total (restored − true)": C_ERR}
     h = 0.8 / max(1, len(comps))
     yt, yl = [], []
     for i, a in enumerate(axes):

@@ -163,7 +163,7 @@ def _quad_row(component: str, axis: str, total: dict, part: dict, note: str) -> 
 
 BUDGET_COMPONENTS = ("uncorrected knowledge", "unobservable (no pair sees it)", "floor (best linear restoration)",
                      "matching noise", "model / synthesis", "measurement (noise + model)",
-                     "integration", "total (restored − true)")
+                     "integration", "star-tracker anchoring", "total (restored − true)")
 
 
 def _centred(e):
@@ -365,26 +365,33 @@ class _AxisBudget:
         remaining = att[f"delta_{a}"] - (self.prev_used if self.prev_used is not None else 0.0)
         eint = _centred(np.where(mask, th_true - remaining, np.nan))
         anchored = bool(int(self.run.restoration.attrs.get("anchored_on_star_tracker", 0)))
-        if anchored:
-            # the star tracker sets the record's trend after the integration (no pair sees it): the
-            # integration is judged without it, and the anchoring's own error stays in "measurement"
-            eint = _centred(eint - record_trend(eint))
         total = _centred(att[f"restored_{a}"] - att[f"true_{a}"])
-        emeas = total - eint
+        eanc = None
+        if anchored:
+            # the star tracker sets the record's trend after the integration (no pair sees it): the integration
+            # and the measurement are judged without it, and the trend left is the anchoring's own error
+            eint = _centred(eint - record_trend(eint))
+            eanc = _centred(record_trend(total - eint))
+        emeas = total - eint if eanc is None else total - eint - eanc
         r_noise = None
         if noise is not None:
             en = np.where(mask, rec.rerun(dperfect + noise) - th_true, np.nan)
             r_noise = _stats_row("matching noise", a, en, ifov, "integrate(true + σ·noise) − integrate(true), 1 draw")
             rows.append(r_noise)
             ser["matching noise"] = en
-        r_meas = _stats_row("measurement (noise + model)", a, emeas, ifov, "total − integration"
-                            + (" (and the star-tracker anchoring's own error)" if anchored else ""))
+        r_meas = _stats_row("measurement (noise + model)", a, emeas, ifov,
+                            "total − integration" + (" − anchoring" if anchored else ""))
         if r_noise is not None:
             rows.append(_quad_row("model / synthesis", a, r_meas, r_noise, "√(measurement² − noise²)"))
         rows.append(r_meas)
         rows.append(_stats_row("integration", a, eint, ifov, "integrate(true differentials) − truth"
                                + (", its trend removed (the star-tracker anchoring sets it)" if anchored else "")))
-        rows.append(_stats_row("total (restored − true)", a, total, ifov, "= measurement + integration"))
+        if eanc is not None:
+            rows.append(_stats_row("star-tracker anchoring", a, eanc, ifov,
+                                   "the record's trend left by the star-tracker samples' noise"))
+            ser["star-tracker anchoring"] = eanc
+        rows.append(_stats_row("total (restored − true)", a, total, ifov, "= measurement + integration"
+                               + (" + anchoring" if anchored else "")))
         rows += self.band_split_rows(total)
         rows += self.yaw_coupling_rows(total)
         ser.update({"measurement": emeas, "integration": eint, "total": total})

@@ -722,5 +722,14 @@ def test_an_anchored_run_judges_the_integration_without_the_trend_the_star_track
         rows = {r["component"]: r for r in bud["rows"] if r["axis"] == a}
         assert rows["integration"]["rms_urad"] == pytest.approx(_stats(eint)[0] * 1e6, rel=2e-3)
         assert "star-tracker anchoring" in rows["integration"]["note"]
+        # the trend left, apart: measurement + integration + anchoring = total, line by line
+        ser = bud["series"][a]
+        tot = np.where(m, meta["restoration"][a].values - true_att(a, t), np.nan)
+        tot = tot - np.nanmean(tot)
+        np.testing.assert_allclose(ser["measurement"] + ser["integration"] + ser["star-tracker anchoring"], tot,
+                                   atol=1e-12, equal_nan=True)
+        anc = ser["star-tracker anchoring"]
+        ok = np.isfinite(anc)
+        assert np.allclose(np.diff(anc[ok], 2), 0.0, atol=1e-15) if ok.sum() > 2 else True   # a straight line
         total = rows["total (restored − true)"]["rms_urad"]
         assert total == pytest.approx(_stats(meta["restoration"][a].values - true_att(a, t))[0] * 1e6, rel=1e-9)
