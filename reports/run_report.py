@@ -420,6 +420,11 @@ def _budget_section(pg: _Page, run: D.RunData, integrate, max_integration_s: flo
                 "frequencies, regularisation, ends. <b>Measurement</b> = total − integration: the cost of the errors "
                 "of the measured differentials; <b>model / synthesis</b> = the part of it matching noise does not "
                 "explain, √(measurement² − noise²) (the 99.7 % figures combine this way only approximately). ")
+        if int(run.restoration.attrs.get("anchored_on_star_tracker", 0)):
+            txt += ("<b>Star-tracker anchoring</b>: the record's trend (offset and slope, which no pair sees) is set "
+                    "by the star-tracker samples after the integration; the integration and the measurement are "
+                    "given without it, and the trend left (the samples' noise through the fitted slope) is this "
+                    "row: total = measurement + integration + anchoring. ")
     txt += ("Methods that adapt to their data (wiener) are frozen on the measured differentials first, so every row "
             "goes through the filter actually applied. All errors over the estimated lines, mean removed.")
     pg.para(txt, "meta")
