@@ -447,7 +447,9 @@ def unmet_criteria(row: dict) -> list:
     """
     out = []
     for a, r in sorted(row.get("actual_over_predicted", {}).items()):
-        if not 1 / SIGMA_CALIBRATION_FACTOR <= r <= SIGMA_CALIBRATION_FACTOR:
+        if not np.isfinite(r):
+            out.append(f"σ {a}: no prediction")
+        elif not 1 / SIGMA_CALIBRATION_FACTOR <= r <= SIGMA_CALIBRATION_FACTOR:
             out.append(f"σ {a} × {r:.2f}")
     for a, c in sorted(row.get("coverage_of_clear_lines", {}).items()):
         if np.isfinite(c) and c < MIN_CLEAR_LINE_COVERAGE:

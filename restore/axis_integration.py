@@ -186,8 +186,9 @@ def running_misfit(residuals, noise, *, block: int = TRANSIENT_BLOCK_LINES) -> n
     z2 = np.asarray(residuals, dtype=np.float64) ** 2 / np.asarray(noise, dtype=np.float64) ** 2
     ok = np.isfinite(z2)
     per_line = np.where(ok.any(0), np.where(ok, z2, 0.0).sum(0) / np.maximum(ok.sum(0), 1), np.nan)
+    # beyond the record the window holds NaN (not the edge line repeated: one bad first line is a few lines)
     return generic_filter(per_line, lambda v: np.nanmedian(v) if np.isfinite(v).sum() > v.size // 4 else np.nan,
-                          size=int(block), mode="nearest")
+                          size=int(block), mode="constant", cval=np.nan)
 
 
 def transient_windows(misfit, *, factor: float, margin: int = TRANSIENT_MARGIN_LINES) -> list[list[int]]:
@@ -228,13 +229,16 @@ def transient_blend(theta, theta_local, windows, *, ramp: int = TRANSIENT_RAMP_L
     from scipy.ndimage import uniform_filter1d
 
     th = np.asarray(theta, dtype=np.float64)
+    loc = np.asarray(theta_local, dtype=np.float64)
     m = np.zeros(th.size)
     for a, b in windows:
         m[int(a):int(b)] = 1.0
+    m[~np.isfinite(loc)] = 0.0          # where the local estimate has a gap the ramp goes back to the main one
     if ramp > 1:
         m = uniform_filter1d(m, int(ramp), mode="nearest")
-    loc = np.asarray(theta_local, dtype=np.float64)
-    return np.where(np.isfinite(loc), m * loc + (1.0 - m) * th, th)
+    out = m * np.nan_to_num(loc) + (1.0 - m) * np.nan_to_num(th)
+    known = (np.isfinite(loc) | (m == 0.0)) & (np.isfinite(th) | (m == 1.0))
+    return np.where(known, out, np.nan)
 
 
 def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options: dict | None = None,
@@ -287,6 +291,7 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
     spec = integration_method(method)
     opts = dict(options or {})
     windows = opts.pop("transient_lines", None)
+    local_weights = opts.pop("transient_lsq", None)
     diffs = [np.asarray(d, dtype=np.float64) for d in diffs]
     taus = [float(t) for t in taus]
     timed = lags is not None and any(np.any(np.asarray(lg) != 0) for lg in lags)
@@ -325,20 +330,31 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
         mw = misfit(theta)
         windows = transient_windows(mw, factor=transient_factor)
         if windows:
-            local = _lsq_estimate(measured, taus, dt, lags, sigmas, weights, highpass_hz, first_stage_gcv)
+            local, local_weights = _lsq_estimate(measured, taus, dt, lags, sigmas, weights, highpass_hz)
             windows = explained_windows(windows, misfit(local), float(np.nanmedian(mw)), limit=TRANSIENT_LSQ_FIT)
     if windows:
         if local is None:
-            local = _lsq_estimate(measured, taus, dt, lags, sigmas, weights, highpass_hz, first_stage_gcv)
+            local, local_weights = _lsq_estimate(measured, taus, dt, lags, sigmas, weights, highpass_hz,
+                                                 fixed=local_weights)
         theta = transient_blend(theta, local, windows)
         opts["transient_lines"] = [list(map(int, w)) for w in windows]
+        opts["transient_lsq"] = dict(local_weights)
     return AxisIntegration(theta=theta, method=spec, options=opts, spectrum=prior)
 
 
-def _lsq_estimate(diffs, taus, dt, lags, sigmas, weights, highpass_hz, first_stage_gcv) -> np.ndarray:
-    """The least-squares estimate (no prior) of the same differentials, high-passed the same way."""
-    return integrate_axis(diffs, taus, dt, method="lsq", lags=lags, sigmas=sigmas, weights=weights,
-                          highpass_hz=highpass_hz, first_stage_gcv=first_stage_gcv).theta
+def _lsq_estimate(diffs, taus, dt, lags, sigmas, weights, highpass_hz, *, fixed=None) -> tuple[np.ndarray, dict]:
+    """The least-squares estimate (no prior) of the same differentials, high-passed the same way, and the
+    weights it used. Lines the main fit gives no weight (filled gaps) are left out; ``fixed`` weights
+    (``{"alpha", "beta"}``, a frozen rerun) make it the same linear map as on the measured record."""
+    d = [np.asarray(x, dtype=np.float64) for x in diffs]
+    if weights is not None:
+        d = [np.where(np.asarray(w, dtype=np.float64) > 0, x, np.nan) for x, w in zip(d, weights)]
+    lsq = integration_method("lsq")
+    kw = {"gcv": False, **fixed} if fixed else {"gcv": True}
+    theta, used = lsq.function(d, taus, dt, **lsq.data_options(lags=lags, sigmas=sigmas), return_weights=True, **kw)
+    if highpass_hz > 0:
+        theta = highpass_nan(theta, dt=dt, cutoff_hz=highpass_hz)
+    return theta, used
 
 
 def _running_misfit_of(theta, measured, taus, dt, lags, weights, prior, highpass_hz) -> np.ndarray:

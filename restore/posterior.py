@@ -53,7 +53,7 @@ from .synthesis import highpass_gain, highpass_nan
 
 __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", "simulated_differentials",
            "fit_residual_rms", "fit_residuals", "band_power", "noise_colour_from_check", "coloured_noise",
-           "knowledge_noise_below", "detrended_rms"]
+           "knowledge_noise_below", "detrended", "detrended_rms", "detrended_rms_over"]
 
 
 #: the real fit residual may exceed the simulated one by this factor before the noise is inflated
@@ -79,7 +79,8 @@ class PosteriorSigma:
     detrended_rms : float
         RMS of the draws' errors once each draw's least-squares line over the
         record is removed [rad]: the predicted error outside the record's
-        trend, which no pair can see (:func:`restore.observability.trend_unobservable`).
+        trend, which no pair can see (:func:`restore.observability.record_trend`), over every line the draws
+        reach.
         NaN when not computed.
     """
 
@@ -88,6 +89,22 @@ class PosteriorSigma:
     samples: int
     noise_colour: np.ndarray | None = None
     detrended_rms: float = float("nan")
+    #: per line, the 1-σ of the draws' errors without their trend [rad] (NaN where not restored), so that the
+    #: detrended RMS can be taken over the lines finally restored (:func:`detrended_rms_over`)
+    detrended_sigma: np.ndarray | None = None
+
+
+def detrended(errors: np.ndarray) -> np.ndarray:
+    """Error draws (draw, line) less each draw's least-squares line (offset + slope) over its finite lines;
+    a draw with fewer than 3 finite lines is NaN."""
+    e = np.atleast_2d(np.asarray(errors, dtype=np.float64))
+    x = np.arange(e.shape[1], dtype=np.float64)
+    out = np.full(e.shape, np.nan)
+    for k, row in enumerate(e):
+        ok = np.isfinite(row)
+        if ok.sum() >= 3:
+            out[k, ok] = row[ok] - np.polyval(np.polyfit(x[ok], row[ok], 1), x[ok])
+    return out
 
 
 def detrended_rms(errors: np.ndarray) -> float:
@@ -96,18 +113,17 @@ def detrended_rms(errors: np.ndarray) -> float:
     NaN lines are left out of each draw's fit and of the mean; NaN when no draw
     has 3 finite lines.
     """
-    e = np.atleast_2d(np.asarray(errors, dtype=np.float64))
-    x = np.arange(e.shape[1], dtype=np.float64)
-    num, cnt = 0.0, 0
-    for row in e:
-        ok = np.isfinite(row)
-        if ok.sum() < 3:
-            continue
-        coef = np.polyfit(x[ok], row[ok], 1)
-        r = row[ok] - np.polyval(coef, x[ok])
-        num += float(np.sum(r ** 2))
-        cnt += int(ok.sum())
-    return float(np.sqrt(num / cnt)) if cnt else float("nan")
+    d = detrended(errors)
+    return float(np.sqrt(np.nanmean(d ** 2))) if np.isfinite(d).any() else float("nan")
+
+
+def detrended_rms_over(ps: PosteriorSigma, restored: np.ndarray) -> float:
+    """The predicted RMS error without the record's trend over the lines ``restored`` holds (finite), i.e.
+    without the flagged ones; the all-line figure when the per-line one is missing."""
+    if ps.detrended_sigma is None:
+        return float(ps.detrended_rms)
+    ok = np.isfinite(np.asarray(restored, dtype=np.float64)) & np.isfinite(ps.detrended_sigma)
+    return float(np.sqrt(np.mean(ps.detrended_sigma[ok] ** 2))) if ok.any() else float("nan")
 
 
 def noise_per_line(record) -> np.ndarray:
@@ -351,6 +367,13 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
         if np.any(colour > 1.0):
             scale = float(np.sqrt(np.mean(colour)))
             errs, _ = run(colour, samples, False)
+    return PosteriorSigma(sigma=np.sqrt(_line_variance(errs, smooth_lines)), noise_scale=float(scale),
+                          samples=int(samples), noise_colour=colour, detrended_rms=detrended_rms(errs),
+                          detrended_sigma=np.sqrt(_line_variance(detrended(errs), smooth_lines)))
+
+
+def _line_variance(errs: np.ndarray, smooth_lines: int) -> np.ndarray:
+    """Mean square of the draws per line (NaN where no draw is finite), averaged over ``smooth_lines`` lines."""
     ok = np.isfinite(errs).any(axis=0)
     var = np.where(ok, np.nanmean(np.where(np.isfinite(errs), errs ** 2, 0.0), axis=0) * errs.shape[0]
                    / np.maximum(np.isfinite(errs).sum(axis=0), 1), np.nan)
@@ -358,8 +381,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
         num = uniform_filter1d(np.where(ok, var, 0.0), smooth_lines, mode="nearest")
         den = uniform_filter1d(ok.astype(np.float64), smooth_lines, mode="nearest")
         var = np.where(ok, num / np.maximum(den, 1e-12), np.nan)
-    return PosteriorSigma(sigma=np.sqrt(var), noise_scale=float(scale), samples=int(samples), noise_colour=colour,
-                          detrended_rms=detrended_rms(errs))
+    return var
 
 
 def _prior(record) -> tuple[np.ndarray, np.ndarray]:

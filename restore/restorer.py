@@ -22,6 +22,7 @@ from simsat.product import Product, clamped_attitude
 from . import stages
 from .errors import RestorationError
 from .method_choice import resolved_method_name
+from .posterior import detrended_rms_over
 from .matching import MATCHING_METHODS
 from .result import PairData, RestorationResult
 from .settings import RestorationSettings
@@ -128,7 +129,7 @@ class Restorer:
                                  anchored=anchored, corrected=corrected,
                                  sigma={a: ps.sigma for a, ps in sigma.items()}, flagged=flagged,
                                  noise_scale={a: ps.noise_scale for a, ps in sigma.items()},
-                                 detrended_rms={a: ps.detrended_rms for a, ps in sigma.items()},
+                                 detrended_rms={a: detrended_rms_over(ps, restored[a]) for a, ps in sigma.items()},
                                  yaw_pitch_coupling=stages.yaw_pitch_coupling(pairs),
                                  yaw_roll_coupling=stages.yaw_coupling(pairs, "roll"))
 

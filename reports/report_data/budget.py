@@ -376,6 +376,8 @@ class _AxisBudget:
         r_noise = None
         if noise is not None:
             en = np.where(mask, rec.rerun(dperfect + noise) - th_true, np.nan)
+            if anchored:  # judged like the measurement it is part of: without the trend the anchoring sets
+                en = en - record_trend(en)
             r_noise = _stats_row("matching noise", a, en, ifov, "integrate(true + σ·noise) − integrate(true), 1 draw")
             rows.append(r_noise)
             ser["matching noise"] = en

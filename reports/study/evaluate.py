@@ -89,7 +89,7 @@ def differential_point(base: str, overrides: dict, *, noise_px: float | dict, se
                                         rate_hz=kc.rate_hz, noise_rad=kc.noise_urad * RAD_PER_URAD) \
             if settings.knowledge_prior else None
         res = integrate_axis(diffs, taus, dt, method=settings.method, options=settings.integration_options,
-                             highpass_hz=hp, psd_ceiling=ceiling)
+                             highpass_hz=hp, psd_ceiling=ceiling, transient_factor=settings.transient_factor)
         err = res.theta - e_now
         row[f"{axis}_rms_px"], row[f"{axis}_p997_px"] = _stats(err, ifov)
         row[f"{axis}_knowledge_rms_px"], _ = _stats(e_now, ifov)

@@ -46,7 +46,7 @@ def _robust_std(x: np.ndarray) -> float:
 
 def integrate_lsq(diffs, taus, dt, *, lags=None, sigmas=None, alpha: float | None = None, beta: float | None = None,
                   noise_std: float | None = None, signal_std: float | None = None,
-                  bandwidth_hz: float | None = None, gcv: bool = True) -> np.ndarray:
+                  bandwidth_hz: float | None = None, gcv: bool = True, return_weights: bool = False):
     """Integrate differentials by regularised least squares in the time domain.
 
     Parameters
@@ -74,19 +74,24 @@ def integrate_lsq(diffs, taus, dt, *, lags=None, sigmas=None, alpha: float | Non
     gcv : bool
         Refine the curvature weight by generalised cross-validation
         (multipliers 0.3–30 of the default; tr(H) by a Hutchinson estimator).
+    return_weights : bool
+        Also return the weights the solve used, ``{"alpha": α, "beta": β}``:
+        given back (with ``gcv=False``) they make the estimator the same
+        linear map on other differentials (a frozen rerun).
 
     Returns
     -------
     ndarray (N,)
         θ at ``n dt`` [rad], mean removed; NaN where no equation reaches
         (beyond the last measured sample or in gaps longer than the pairs' lags).
+        With ``return_weights``: ``(θ, weights)``.
     """
     diffs, taus, n = _checked(diffs, taus, dt)
     if lags is None:
         lags = [np.zeros(n)] * len(diffs)
     A, b, w, noise_levels = _equations(diffs, taus, dt, lags, sigmas)
     if A is None:
-        return np.full(n, np.nan)
+        return (np.full(n, np.nan), {"alpha": alpha, "beta": beta}) if return_weights else np.full(n, np.nan)
     wn = w / np.median(w)  # relative weights: median equation has weight 1
     sigma_d = float(np.median(noise_levels)) if noise_std is None else float(noise_std)
     dv = np.concatenate([d[np.isfinite(d)] for d in diffs])
@@ -113,7 +118,8 @@ def integrate_lsq(diffs, taus, dt, *, lags=None, sigmas=None, alpha: float | Non
             break
         sigma_d = new
     if gcv:
-        theta = _gcv_solution(A, b, wn, AtWA + a * eye, bt, DtD, y)
+        theta, kappa = _gcv_solution(A, b, wn, AtWA + a * eye, bt, DtD, y)
+        bt = kappa * bt
     # where no equation constrains θ (beyond the reach of every pair) there is no estimate
     reach = np.asarray(abs(A).sum(axis=0)).ravel() > 0
     covered = _dilate_coverage(reach, n)
@@ -121,7 +127,7 @@ def integrate_lsq(diffs, taus, dt, *, lags=None, sigmas=None, alpha: float | Non
     m = np.isfinite(theta)
     if m.any():
         theta = theta - theta[m].mean()
-    return theta
+    return (theta, {"alpha": float(a), "beta": float(bt)}) if return_weights else theta
 
 
 def _checked(diffs, taus, dt) -> tuple:
@@ -206,8 +212,9 @@ def _prior_weights(dv, sigma_d: float, dt: float, *, alpha, beta, signal_std, ba
     return a, beta
 
 
-def _gcv_solution(A, b, wn, base, bt: float, DtD, y) -> np.ndarray:
-    """Generalised cross-validation over a multiplier (0.3–30) of the curvature weight; tr(H) by Hutchinson."""
+def _gcv_solution(A, b, wn, base, bt: float, DtD, y) -> tuple[np.ndarray, float]:
+    """Generalised cross-validation over a multiplier (0.3–30) of the curvature weight; tr(H) by Hutchinson.
+    Returns the solution and the multiplier chosen."""
     r0 = A.shape[0]
     rng = np.random.default_rng(0)
     probes = rng.choice([-1.0, 1.0], size=(3, r0))
@@ -222,7 +229,7 @@ def _gcv_solution(A, b, wn, base, bt: float, DtD, y) -> np.ndarray:
         g = r0 * float(res @ res) / max(r0 - tr, 1.0) ** 2
         if best is None or g < best[0]:
             best = (g, th, kappa)
-    return best[1]
+    return best[1], best[2]
 
 
 def _dilate_coverage(reach: np.ndarray, n: int) -> np.ndarray:

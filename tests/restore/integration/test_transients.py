@@ -90,3 +90,40 @@ def test_stationary_lines_find_no_transient():
     t, diffs, lags = _record(_cmg)
     res = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags, transient_factor=4.0)
     assert "transient_lines" not in res.options
+
+
+def test_a_frozen_rerun_with_windows_is_one_linear_map():
+    """Reruns (Monte Carlo, budget) integrate other differentials with the same filter: with the windows and the
+    least-squares weights frozen, integrating d + n is integrating d plus integrating n."""
+    t, diffs, lags = _record(lambda x: _cmg(x) + _chirp(x), pitch=lambda x: _chirp(x) / 3)
+    sigmas = [np.full(N, 0.08 * IFOV) for _ in TAUS]      # the synthesis's formal σ, as the pipeline gives them
+    found = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags, sigmas=sigmas, transient_factor=4.0)
+    assert "transient_lines" in found.options and "transient_lsq" in found.options
+    opts = methods.integration_method("wiener").frozen_options(found.options, found.spectrum)
+    noise = [0.05 * IFOV * np.random.default_rng(7 + j).standard_normal(N) for j in range(len(TAUS))]
+
+    def run(d):
+        return integrate_axis(d, TAUS, DT, method="wiener", lags=lags, sigmas=sigmas, options=opts).theta
+
+    both = run([a + b for a, b in zip(diffs, noise)])
+    np.testing.assert_allclose(both, run(diffs) + run(noise), atol=1e-4 * IFOV)
+
+
+def test_filled_lines_the_main_fit_ignores_do_not_spoil_the_local_estimate():
+    """Lines of weight 0 (cubic fills across a fold, pixels off) are left out of the least-squares estimate
+    too: with four 8-line fills 3 px off in every pair it is what it is without them."""
+    from restore.axis_integration import _lsq_estimate
+
+    t, clean, lags = _record(lambda x: _cmg(x) + _chirp(x), pitch=lambda x: _chirp(x) / 3)
+    truth = _cmg(t) + _chirp(t)
+    spoilt = [d.copy() for d in clean]
+    weights = [np.ones(N) for _ in TAUS]
+    for j, d in enumerate(spoilt):
+        for start in (500, 900, 1300, 1700):
+            d[start:start + 8] += 3 * IFOV
+            weights[j][start:start + 8] = 0.0
+    ref, _ = _lsq_estimate(clean, TAUS, DT, lags, None, weights, 0.0)
+    got, _ = _lsq_estimate(spoilt, TAUS, DT, lags, None, weights, 0.0)
+    assert _rms_px(got - truth) < 1.2 * _rms_px(ref - truth) < 0.05
+    ignored, _ = _lsq_estimate(spoilt, TAUS, DT, lags, None, None, 0.0)       # the fills taken at face value
+    assert _rms_px(ignored - truth) > 3 * _rms_px(got - truth)
