@@ -43,7 +43,7 @@ __all__ = ["IntegrationMethod", "INTEGRATION_METHODS", "DEFAULT_METHOD", "PIPELI
            "register_method"]
 
 #: options the pipeline supplies itself from the data (not settable in a scenario)
-PIPELINE_OPTIONS = frozenset({"weights", "lags", "sigmas", "psd_ceiling", "return_details"})
+PIPELINE_OPTIONS = frozenset({"weights", "lags", "sigmas", "psd_ceiling", "return_details", "return_weights"})
 
 DEFAULT_METHOD = "wiener"
 
