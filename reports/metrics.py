@@ -14,7 +14,7 @@ from restore.correction import correct_bands, misregistration, weak_band_misregi
 from simsat.attitude import AttitudeSeries
 from simsat.units import AXES
 
-__all__ = ["error_stats", "attitude_errors", "truth_at", "error_split_by_band", "unobservable_split",
+__all__ = ["error_stats", "attitude_errors", "truth_at", "error_split_by_band", "unobservable_split", "yaw_seen",
            "restoration_unobservable_split", "clear_line_fraction",
            "clear_line_coverage", "attitude_misregistration", "misregistration_floor"]
 
@@ -133,12 +133,9 @@ def restoration_unobservable_split(res, truth, axis: str) -> dict:
         return {}
     obs = record_observability(rec)
     err = res.restored[axis] - truth_at(truth, axis, res.time)
-    yaw_seen = None
-    c = res.yaw_coupling(axis)
-    if abs(c) >= YAW_COUPLING_REPORTED:
-        yaw_seen = c * (truth_at(truth, "yaw", res.time) - res.knowledge["yaw"])
+    seen = yaw_seen(res.yaw_coupling(axis), truth_at(truth, "yaw", res.time), res.knowledge["yaw"])
     return unobservable_split(err, rec.line_period_s, obs.freq, obs.unobservable_band,
-                              predicted_band_rms=obs.unobservable_rms_rad, yaw_seen=yaw_seen)
+                              predicted_band_rms=obs.unobservable_rms_rad, yaw_seen=seen)
 
 
 #: a line is "clear" when at least this fraction of its columns sees land that is neither cloud nor water
@@ -191,6 +188,14 @@ YAW_COUPLING_REPORTED = 0.02
 YAW_COUPLING_ATTRS = {"pitch": "yaw_pitch_coupling", "roll": "yaw_roll_coupling"}
 
 
+def yaw_seen(coupling: float, true_yaw, knowledge_yaw):
+    """The yaw an axis's restoration books as its own, ``coupling × (true − knowledge yaw)``; None when the
+    coupling is below :data:`YAW_COUPLING_REPORTED` (at nadir, looking straight down)."""
+    if abs(float(coupling)) < YAW_COUPLING_REPORTED:
+        return None
+    return float(coupling) * (np.asarray(true_yaw, dtype=np.float64) - np.asarray(knowledge_yaw, dtype=np.float64))
+
+
 def attitude_errors(restoration, truth, *, axes=AXES) -> dict:
     """Per-axis error statistics of a restoration dataset against truth.
 
@@ -222,11 +227,12 @@ def attitude_errors(restoration, truth, *, axes=AXES) -> dict:
             k_abs = (kn - tru)[mask]
             s["knowledge_absolute_rms_px"] = float(np.sqrt(np.mean(k_abs ** 2)) / ifov) if k_abs.size else float("nan")
         c = float(restoration.attrs.get(YAW_COUPLING_ATTRS.get(a, ""), 0.0))
-        if abs(c) >= YAW_COUPLING_REPORTED and "knowledge_yaw" in restoration:
+        seen = yaw_seen(c, truth_at(truth, "yaw", t), np.asarray(restoration["knowledge_yaw"].values, dtype=np.float64)
+                        ) if "knowledge_yaw" in restoration else None
+        if seen is not None:
             # off nadir the images see pitch (roll, tilted along track) + c × (yaw the knowledge misses):
             # the error without that part
-            missed = truth_at(truth, "yaw", t) - np.asarray(restoration["knowledge_yaw"].values, dtype=np.float64)
-            w = error_stats(est - tru - c * missed, ifov_rad=ifov)
+            w = error_stats(est - tru - seen, ifov_rad=ifov)
             s["rms_px_without_yaw_coupling"], s["p997_px_without_yaw_coupling"] = w["rms_px"], w["p997_px"]
             s["yaw_coupling"] = c
         out[a] = s

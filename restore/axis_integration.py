@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import CubicSpline
+from scipy.ndimage import generic_filter, uniform_filter1d
 
 from .integration import integrate
 from .integration.methods import IntegrationMethod, integration_method
@@ -181,8 +182,6 @@ def running_misfit(residuals, noise, *, block: int = TRANSIENT_BLOCK_LINES) -> n
     failed syntheses (a fold at several pixels of jitter) raise a few lines a
     lot and leave it alone.
     """
-    from scipy.ndimage import generic_filter
-
     z2 = np.asarray(residuals, dtype=np.float64) ** 2 / np.asarray(noise, dtype=np.float64) ** 2
     ok = np.isfinite(z2)
     per_line = np.where(ok.any(0), np.where(ok, z2, 0.0).sum(0) / np.maximum(ok.sum(0), 1), np.nan)
@@ -226,8 +225,6 @@ def explained_windows(windows, misfit_local, baseline: float, *, limit: float) -
 
 def transient_blend(theta, theta_local, windows, *, ramp: int = TRANSIENT_RAMP_LINES) -> np.ndarray:
     """``theta`` with ``theta_local`` inside ``windows`` ([first, stop) lines), ramped over ``ramp`` lines."""
-    from scipy.ndimage import uniform_filter1d
-
     th = np.asarray(theta, dtype=np.float64)
     loc = np.asarray(theta_local, dtype=np.float64)
     m = np.zeros(th.size)

@@ -97,14 +97,11 @@ class PosteriorSigma:
 def detrended(errors: np.ndarray) -> np.ndarray:
     """Error draws (draw, line) less each draw's least-squares line (offset + slope) over its finite lines;
     a draw with fewer than 3 finite lines is NaN."""
+    from .observability import record_trend
+
     e = np.atleast_2d(np.asarray(errors, dtype=np.float64))
-    x = np.arange(e.shape[1], dtype=np.float64)
-    out = np.full(e.shape, np.nan)
-    for k, row in enumerate(e):
-        ok = np.isfinite(row)
-        if ok.sum() >= 3:
-            out[k, ok] = row[ok] - np.polyval(np.polyfit(x[ok], row[ok], 1), x[ok])
-    return out
+    return np.array([row - record_trend(row) if np.isfinite(row).sum() >= 3 else np.full(row.shape, np.nan)
+                     for row in e])
 
 
 def detrended_rms(errors: np.ndarray) -> float:
