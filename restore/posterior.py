@@ -208,20 +208,32 @@ def fit_residuals(diffs: np.ndarray, theta: np.ndarray, taus, lags, dt: float, *
     return r
 
 
-#: fewest periodogram bins behind one band of the frequency-resolved noise check
+#: fewest periodogram bins behind one band of the frequency-resolved noise check, above the lowest frequencies
 CHECK_BAND_BINS = 16
 #: log-spaced bands of the frequency-resolved noise check (before merging to CHECK_BAND_BINS bins)
 CHECK_BANDS = 24
+#: at the lowest frequencies a band spans this fraction of its start bin (at least one bin), up to CHECK_BAND_BINS
+LOW_BAND_FRACTION = 0.5
 
 
 def _band_edges(n: int, bands: int = CHECK_BANDS, min_bins: int = CHECK_BAND_BINS) -> list:
-    """Bin indices splitting ``rfftfreq(n)`` (DC left out) into log-spaced bands of at least ``min_bins`` bins."""
+    """Bin indices splitting ``rfftfreq(n)`` (DC left out) into log-spaced bands.
+
+    Above the lowest frequencies a band has at least ``min_bins`` bins; below,
+    a band spans half its start bin (one bin, one, two, two, three, …): the
+    integration amplifies noise as ``1 / (2π f τ)``, so the few lowest bins
+    weigh most in the restored angle, and a slow excess of the matching error
+    there (common to a line's points, 3-10× the white level in power at
+    0.6-2 Hz on low_frequencies) would be diluted in a 16-bin band. A narrow
+    band's excess must be larger to count (:func:`noise_colour_from_check`).
+    """
     nf = n // 2 + 1
     growth = (nf / min_bins) ** (1.0 / max(int(bands), 1))
     starts, i = [], 1
     while i < nf - min_bins // 2:
         starts.append(i)
-        i += max(min_bins, int(i * (growth - 1.0)))
+        width = max(1, int(i * LOW_BAND_FRACTION))
+        i += width if width < min_bins else max(min_bins, int(i * (growth - 1.0)))
     starts.append(nf)
     return starts if len(starts) > 1 else [1, max(nf, 2)]   # a very short record: one band of all its bins
 

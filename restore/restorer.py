@@ -206,6 +206,13 @@ class Restorer:
                     int(m.sum()) for dr in drops for m in dr.values())
                 differentials = [stages.pair_differentials(p, s, n_lines, te, drop=dr) for p, dr in zip(used, drops)]
                 recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings)
+            # a line whose bands' windows are stretched against each other matches worse: weigh it by how its
+            # pair's fit residual grows with the stretch, and integrate again
+            factors = stages.distortion_factors(differentials, recs, s, te)
+            if any(factors):
+                for d, fac in zip(differentials, factors):
+                    d.axis_factor = fac
+                recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings)
             records.update(recs)
             change = 0.0
             for a in s.axes:

@@ -6,7 +6,7 @@ can be called alone (tests, studies). Never reads ``truth.nc``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.ndimage import maximum_filter1d
@@ -23,7 +23,8 @@ from .matching import match_points, support_margin
 from .method_choice import predicted_differential, resolve_method
 from .observability import observability
 from .knowledge_prior import knowledge_psd_ceiling
-from .posterior import posterior_sigma
+from .distortion import stretch_weight_factors, window_stretch
+from .posterior import fit_residuals, posterior_sigma
 from .rematch import rematch_pair
 from .result import IntegrationRecord, PairData
 from .selection import estimate_image_noise, expected_matching_std, select_points_in_blocks
@@ -383,7 +384,8 @@ class PairDifferentials:
     ``diffs``/``sigmas``: axis → (N,) [rad] (gaps dropped/filled, window
     compensated); ``lag_s``: extra delay per line [s]; ``weight``: relative
     weight per line (matched points, at least ``min_points_per_line``; 0 on
-    filled lines).
+    filled lines); ``axis_factor``: axis → (N,) factor on ``weight`` for that
+    axis (:func:`distortion_factors`), none by default.
     """
 
     tau_s: float
@@ -391,6 +393,12 @@ class PairDifferentials:
     sigmas: dict
     lag_s: np.ndarray
     weight: np.ndarray
+    axis_factor: dict = field(default_factory=dict)
+
+    def weight_for(self, axis: str) -> np.ndarray:
+        """The line weights ``axis`` is integrated with."""
+        f = self.axis_factor.get(axis)
+        return self.weight if f is None else self.weight * f
 
 
 def pair_differentials(pair: PairData, settings: RestorationSettings, n_lines: int,
@@ -454,6 +462,31 @@ def differential_spikes(pair: PairData, differentials: PairDifferentials, increm
         mask = spikes(pair.synthesis.diff[:, k] - pred, n_sigma=settings.despike_sigma)
         if mask.any():
             out[a] = mask
+    return out
+
+
+def distortion_factors(differentials: list, records: dict, settings: RestorationSettings,
+                       line_period_s: float) -> list:
+    """Per pair, axis → the weight factor of each line for how stretched B's window is against A's.
+
+    :mod:`restore.distortion`: each axis's fit residual (the pair's
+    differentials minus those its last integration predicts) binned by the
+    pair's window stretch ``|dλ/dl|``. Returns one dict per pair of
+    ``differentials`` (empty with ``restoration.distortion_weighting`` off).
+    """
+    out = [dict() for _ in differentials]
+    if not settings.distortion_weighting:
+        return out
+    stretch = np.array([window_stretch(np.asarray(d.lag_s, dtype=np.float64) / line_period_s)
+                        for d in differentials])
+    for a, rec in records.items():
+        d = np.asarray(rec.diffs, dtype=np.float64)
+        res = fit_residuals(d, np.asarray(rec.increment, dtype=np.float64), [float(t) for t in rec.taus],
+                            rec.lags_s, line_period_s, highpass_hz=rec.highpass_hz)
+        usable = np.isfinite(res) & (np.asarray([x.weight for x in differentials]) > 0)
+        f = stretch_weight_factors(res, stretch, usable)
+        for j in range(len(differentials)):
+            out[j][a] = f[j]
     return out
 
 
@@ -603,7 +636,7 @@ def integrate_differentials(axis: str, used: list, differentials: list, previous
     taus = [d.tau_s for d in differentials]
     lags = [d.lag_s for d in differentials]
     sigmas = [d.sigmas[axis] for d in differentials]
-    weights = [d.weight for d in differentials]
+    weights = [d.weight_for(axis) for d in differentials]
     method, selection = resolve_method(settings.method, diffs, taus, line_period_s, lags=lags, sigmas=sigmas,
                                        weights=weights, psd_ceiling=psd_ceiling)
     res = integrate_axis(diffs, taus, line_period_s, method=method,

@@ -232,3 +232,24 @@ def test_prior_draw_high_pass_is_the_whole_signals():
     assert np.std((record_only - hp)[ends]) > 5 * np.std((record_only - hp)[mid])
     # without a high-pass: the draw alone, as before
     assert isinstance(prior_draw(freq, psd, n, dt, np.random.default_rng(3)), np.ndarray)
+
+
+def test_the_noise_check_resolves_the_lowest_frequencies_bin_by_bin():
+    """The integration amplifies noise as 1 / (2π f τ): an excess in the 3 lowest bins must not be diluted in a
+    16-bin band, where it would not count."""
+    from restore.posterior import CHECK_BAND_BINS, _band_edges, noise_colour_from_check
+
+    n = 4000
+    edges = _band_edges(n)
+    assert edges[:4] == [1, 2, 3, 4] and edges[-1] == n // 2 + 1
+    widths = np.diff(edges)
+    assert np.all(widths >= 1) and widths[-2] >= CHECK_BAND_BINS
+    sim = np.ones((3, len(edges) - 1))                       # the white model's residual power per band
+    real = sim.copy()
+    real[:, :3] = 10.0                                       # a slow excess in bins 1-3, 10× the white power
+    colour = noise_colour_from_check(real, sim, edges, n)
+    np.testing.assert_allclose(colour[:, 1:4], 10.0)          # found where it is, at its level
+    assert np.all(colour[:, 8:] < 1.0 + 1e-12)                # and not spread beyond
+    # 1.1× in a one-bin band is within a periodogram's scatter: not counted
+    real[:, :3] = 1.1
+    assert np.all(noise_colour_from_check(real, sim, edges, n) == 1.0)
