@@ -206,9 +206,9 @@ class Restorer:
                     int(m.sum()) for dr in drops for m in dr.values())
                 differentials = [stages.pair_differentials(p, s, n_lines, te, drop=dr) for p, dr in zip(used, drops)]
                 recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings)
-            # a line whose bands' windows are stretched against each other matches worse: weigh it by how its
-            # pair's fit residual grows with the stretch, and integrate again
-            factors = stages.distortion_factors(differentials, recs, s, te)
+            # a line whose bands' windows are stretched against each other, or that lies next to a gap, matches
+            # worse: weigh it by how its pair's fit residual grows with that, and integrate again
+            factors = stages.line_weight_factors(differentials, recs, s, te)
             if any(factors):
                 for d, fac in zip(differentials, factors):
                     d.axis_factor = fac

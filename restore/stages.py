@@ -23,7 +23,7 @@ from .matching import match_points, support_margin
 from .method_choice import predicted_differential, resolve_method
 from .observability import observability
 from .knowledge_prior import knowledge_psd_ceiling
-from .distortion import stretch_weight_factors, window_stretch
+from .line_weights import gap_distance, residual_weight_factors, window_stretch
 from .posterior import fit_residuals, posterior_sigma
 from .rematch import rematch_pair
 from .result import IntegrationRecord, PairData
@@ -385,7 +385,7 @@ class PairDifferentials:
     compensated); ``lag_s``: extra delay per line [s]; ``weight``: relative
     weight per line (matched points, at least ``min_points_per_line``; 0 on
     filled lines); ``axis_factor``: axis → (N,) factor on ``weight`` for that
-    axis (:func:`distortion_factors`), none by default.
+    axis (:func:`line_weight_factors`), none by default.
     """
 
     tau_s: float
@@ -465,26 +465,30 @@ def differential_spikes(pair: PairData, differentials: PairDifferentials, increm
     return out
 
 
-def distortion_factors(differentials: list, records: dict, settings: RestorationSettings,
-                       line_period_s: float) -> list:
-    """Per pair, axis → the weight factor of each line for how stretched B's window is against A's.
+def line_weight_factors(differentials: list, records: dict, settings: RestorationSettings,
+                        line_period_s: float) -> list:
+    """Per pair, axis → the weight factor of each line for what makes its matches worse (:mod:`restore.line_weights`).
 
-    :mod:`restore.distortion`: each axis's fit residual (the pair's
-    differentials minus those its last integration predicts) binned by the
-    pair's window stretch ``|dλ/dl|``. Returns one dict per pair of
-    ``differentials`` (empty with ``restoration.distortion_weighting`` off).
+    Each axis's fit residual (the pair's differentials minus those its last
+    integration predicts), normalised by the line weights, is binned first by
+    the stretch of B's window against A's ``|dλ/dl|``, then by the distance
+    to the nearest gap; the two factors multiply. Returns one dict per pair of
+    ``differentials`` (empty with ``restoration.line_weighting`` off).
     """
     out = [dict() for _ in differentials]
-    if not settings.distortion_weighting:
+    if not settings.line_weighting:
         return out
     stretch = np.array([window_stretch(np.asarray(d.lag_s, dtype=np.float64) / line_period_s)
                         for d in differentials])
+    base = np.array([d.weight for d in differentials], dtype=np.float64)
     for a, rec in records.items():
         d = np.asarray(rec.diffs, dtype=np.float64)
         res = fit_residuals(d, np.asarray(rec.increment, dtype=np.float64), [float(t) for t in rec.taus],
                             rec.lags_s, line_period_s, highpass_hz=rec.highpass_hz)
-        usable = np.isfinite(res) & (np.asarray([x.weight for x in differentials]) > 0)
-        f = stretch_weight_factors(res, stretch, usable)
+        usable = np.isfinite(res) & np.isfinite(d) & (base > 0)
+        # the gaps are the stretches left unfilled (cloud, water, no texture), not a failed line filled over
+        f = residual_weight_factors(res, stretch, usable, base)
+        f = f * residual_weight_factors(res, gap_distance(np.isfinite(d)), usable, base * f, increasing=False)
         for j in range(len(differentials)):
             out[j][a] = f[j]
     return out

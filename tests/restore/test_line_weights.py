@@ -1,9 +1,10 @@
-"""Lines whose bands' windows are stretched against each other: weighed by how the fit residual grows."""
+"""Lines whose matches are worse for a known cause (stretched windows, gap edges): weighed by how the fit residual
+grows with it."""
 import numpy as np
 import pytest
 
 from restore.axis_integration import integrate_axis
-from restore.distortion import isotonic_increasing, stretch_weight_factors, window_stretch
+from restore.line_weights import gap_distance, isotonic_increasing, residual_weight_factors, window_stretch
 from restore.posterior import fit_residuals
 
 DT = 4e-4
@@ -36,7 +37,7 @@ def test_factors_follow_a_known_growth_of_the_residual_variance():
     s = rng.uniform(0.0, 2.0, (2, 20000))
     var = 1.0 + (s / 0.5) ** 2
     r = rng.standard_normal(s.shape) * np.sqrt(var)
-    f = stretch_weight_factors(r, s)
+    f = residual_weight_factors(r, s)
     expected = 1.0 / var
     # the least stretched bin's variance (its median stretch ≈ 0.05) is the reference
     expected *= 1.0 + (0.05 / 0.5) ** 2
@@ -48,7 +49,7 @@ def test_factors_follow_a_known_growth_of_the_residual_variance():
 def test_factors_stay_near_one_where_the_residual_does_not_grow():
     rng = np.random.default_rng(4)
     s = rng.uniform(0.0, 2.0, (3, 4000))
-    f = stretch_weight_factors(rng.standard_normal(s.shape), s)
+    f = residual_weight_factors(rng.standard_normal(s.shape), s)
     assert np.median(f) > 0.85 and f.min() > 0.6
 
 
@@ -56,13 +57,13 @@ def test_too_few_lines_or_unusable_lines_keep_the_weights():
     rng = np.random.default_rng(5)
     s = rng.uniform(0.0, 2.0, (1, 80))
     r = rng.standard_normal((1, 80)) * (1 + 10 * s)
-    np.testing.assert_array_equal(stretch_weight_factors(r, s), 1.0)          # < 2 bins of 50 lines
+    np.testing.assert_array_equal(residual_weight_factors(r, s), 1.0)          # < 2 bins of 50 lines
     s = rng.uniform(0.0, 2.0, (1, 4000))
     r = rng.standard_normal((1, 4000)) * (1 + 10 * s)
     usable = np.zeros((1, 4000), dtype=bool)
-    np.testing.assert_array_equal(stretch_weight_factors(r, s, usable), 1.0)
+    np.testing.assert_array_equal(residual_weight_factors(r, s, usable), 1.0)
     with pytest.raises(ValueError, match="one shape"):
-        stretch_weight_factors(r, s[:, :10])
+        residual_weight_factors(r, s[:, :10])
 
 
 def _stretched_record(seed=0):
@@ -94,7 +95,7 @@ def test_weighing_the_stretched_lines_restores_with_less_error():
     t, truth, diffs, lags, stretch = _stretched_record()
     first = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags, transient_factor=0.0)
     res = fit_residuals(np.array(diffs), first.theta, TAUS, lags, DT, highpass_hz=2.0)
-    f = stretch_weight_factors(res, stretch)
+    f = residual_weight_factors(res, stretch)
     assert f[stretch > 1.1].mean() < 0.3 * f[stretch < 0.5].mean()
     again = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags, weights=list(f), transient_factor=0.0)
     from restore.synthesis import highpass_nan
@@ -115,11 +116,44 @@ def test_the_pipeline_step_gives_each_pair_and_axis_its_factors_and_can_be_switc
                           highpass_hz=2.0)
     pds = [stages.PairDifferentials(tau_s=tau, diffs={"roll": d}, sigmas={"roll": np.full(N, IFOV)}, lag_s=lag,
                                     weight=np.full(N, 24.0)) for tau, d, lag in zip(TAUS, diffs, lags)]
-    factors = stages.distortion_factors(pds, {"roll": rec}, RestorationSettings(), DT)
+    factors = stages.line_weight_factors(pds, {"roll": rec}, RestorationSettings(), DT)
     assert len(factors) == 3 and all(set(f) == {"roll"} for f in factors)
     pds[0].axis_factor = factors[0]
     np.testing.assert_allclose(pds[0].weight_for("roll"), 24.0 * factors[0]["roll"])
     np.testing.assert_array_equal(pds[0].weight_for("pitch"), 24.0)          # no factor for that axis
     assert factors[0]["roll"][stretch[0] > 1.1].mean() < 0.3
-    off = stages.distortion_factors(pds, {"roll": rec}, RestorationSettings(distortion_weighting=False), DT)
+    off = stages.line_weight_factors(pds, {"roll": rec}, RestorationSettings(line_weighting=False), DT)
     assert off == [{}, {}, {}]
+
+
+def test_gap_distance_counts_lines_to_the_nearest_unusable_one():
+    u = np.ones(12, dtype=bool)
+    u[4:6] = False
+    np.testing.assert_array_equal(gap_distance(u), [4, 3, 2, 1, 0, 0, 1, 2, 3, 4, 5, 6])
+    assert np.all(gap_distance(np.ones((2, 7), dtype=bool)) == 7)          # the record's ends are not gaps
+
+
+def test_closeness_to_a_gap_is_weighed_down_when_the_residual_says_so():
+    rng = np.random.default_rng(8)
+    usable = np.ones((2, 6000), dtype=bool)
+    for start in range(300, 6000, 700):
+        usable[:, start:start + 60] = False                                # clouds
+    dist = gap_distance(usable)
+    sigma = 1.0 + 2.0 * np.exp(-dist / 15.0)                               # 3 × next to a gap, 1 × far
+    r = np.where(usable, rng.standard_normal(usable.shape) * sigma, np.nan)
+    f = residual_weight_factors(r, dist, usable, increasing=False)
+    near, far = usable & (dist <= 2), usable & (dist > 100)
+    assert 0.08 < np.median(f[near]) < 0.2                                  # ≈ 1 / 3² … 1 / 2.5²
+    assert np.median(f[far]) > 0.85
+
+
+def test_a_cause_the_weights_already_model_is_not_counted_twice():
+    """Residual variance ∝ 1 / weight, the weight falling with the stretch: normalised, nothing is left."""
+    rng = np.random.default_rng(9)
+    s = rng.uniform(0.0, 2.0, (2, 8000))
+    w = 24.0 / (1.0 + (s / 0.5) ** 2)
+    r = rng.standard_normal(s.shape) / np.sqrt(w)
+    raw = residual_weight_factors(r, s)
+    normalised = residual_weight_factors(r, s, weights=w)
+    assert np.median(raw[s > 1.5]) < 0.2
+    assert np.median(normalised) > 0.85 and np.median(normalised[s > 1.5]) > 0.8
