@@ -124,6 +124,10 @@ def test_the_pipeline_step_gives_each_pair_and_axis_its_factors_and_can_be_switc
     assert factors[0]["roll"][stretch[0] > 1.1].mean() < 0.3
     off = stages.line_weight_factors(pds, {"roll": rec}, RestorationSettings(line_weighting=False), DT)
     assert off == [{}, {}, {}]
+    # one pair: the fit absorbs its noise, its residual measures nothing — no weighting
+    one = SimpleNamespace(diffs=rec.diffs[:1], increment=first.theta, taus=rec.taus[:1], lags_s=rec.lags_s[:1],
+                          highpass_hz=2.0)
+    assert stages.line_weight_factors(pds[:1], {"roll": one}, RestorationSettings(), DT) == [{}]
 
 
 def test_gap_distance_counts_lines_to_the_nearest_unusable_one():
