@@ -212,7 +212,9 @@ class Restorer:
             if any(factors):
                 for d, fac in zip(differentials, factors):
                     d.axis_factor = fac
-                recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings)
+                # reweighting does not make a tone appear: where the search found none, it is not run again
+                toneless = {a for a, r in recs.items() if r.spectrum is not None and r.spectrum.tones is None}
+                recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings, toneless)
             records.update(recs)
             change = 0.0
             for a in s.axes:
@@ -234,12 +236,13 @@ class Restorer:
         return pairs, records, estimate
 
     def _integrate_axes(self, product: Product, used: list, differentials: list, estimate: dict,
-                        ceilings: dict) -> tuple:
-        """Integrate every restored axis's differentials once: ({axis: record}, {axis: increment})."""
+                        ceilings: dict, toneless: set = frozenset()) -> tuple:
+        """Integrate every restored axis's differentials once: ({axis: record}, {axis: increment}); the axes in
+        ``toneless`` without the search for a blind tone."""
         s = self.settings
         recs = {a: stages.integrate_differentials(a, used, differentials, estimate[a], s,
                                                   product.instrument.line_period_s, where=product.path,
-                                                  psd_ceiling=ceilings.get(a))
+                                                  psd_ceiling=ceilings.get(a), no_blind_tone=a in toneless)
                 for a in s.axes}
         return recs, {a: r.increment for a, r in recs.items()}
 

@@ -18,6 +18,7 @@ from simsat.product import Product, clamped_attitude
 from .axis_integration import integrate_axis
 from .correction import correct_bands, line_median, misregistration, rank_within_line, weak_band_misregistration
 from .errors import RestorationError
+from .integration.methods import integration_method
 from .integration.wiener import spectrum_for_lines
 from .matching import match_points, support_margin
 from .method_choice import predicted_differential, resolve_method
@@ -626,11 +627,13 @@ def knowledge_ceilings(product: Product, knowledge: dict, settings: RestorationS
 
 def integrate_differentials(axis: str, used: list, differentials: list, previous: np.ndarray,
                             settings: RestorationSettings, line_period_s: float, *, where="",
-                            psd_ceiling=None) -> IntegrationRecord:
+                            psd_ceiling=None, no_blind_tone: bool = False) -> IntegrationRecord:
     """Integrate one axis's differentials of the pairs ``used`` (:func:`integrate_axis`), recorded.
 
     ``psd_ceiling`` (freq, ceiling): what the AOCS knowledge already knows
     (:func:`knowledge_ceilings`), for methods that estimate a prior.
+    ``no_blind_tone``: skip the search for a tone on a common blind frequency
+    (an integration of the same differentials, reweighted, found none).
     """
     diffs = [d.diffs[axis] for d in differentials]
     if all(np.all(~np.isfinite(d)) for d in diffs):
@@ -647,8 +650,11 @@ def integrate_differentials(axis: str, used: list, differentials: list, previous
     weights = [d.weight_for(axis) for d in differentials]
     method, selection = resolve_method(settings.method, diffs, taus, line_period_s, lags=lags, sigmas=sigmas,
                                        weights=weights, psd_ceiling=psd_ceiling)
+    options = settings.integration_options if selection is None else {}
+    if no_blind_tone and integration_method(method).blind_tones and "tones" not in options:
+        options = {**options, "tones": None}
     res = integrate_axis(diffs, taus, line_period_s, method=method,
-                         options=settings.integration_options if selection is None else {},
+                         options=options,
                          lags=lags, sigmas=sigmas, weights=weights, highpass_hz=settings.highpass_hz,
                          psd_ceiling=psd_ceiling, transient_factor=settings.transient_factor)
     prior = res.spectrum or spectrum_for_lines(diffs, taus, line_period_s)

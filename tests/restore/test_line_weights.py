@@ -161,3 +161,24 @@ def test_a_cause_the_weights_already_model_is_not_counted_twice():
     normalised = residual_weight_factors(r, s, weights=w)
     assert np.median(raw[s > 1.5]) < 0.2
     assert np.median(normalised) > 0.85 and np.median(normalised[s > 1.5]) > 0.8
+
+
+def test_the_reweighted_integration_skips_the_tone_search_only_where_none_was_found(monkeypatch):
+    from restore import axis_integration, stages
+    from restore.settings import RestorationSettings
+
+    t, truth, diffs, lags, stretch = _stretched_record(seed=2)
+    pds = [stages.PairDifferentials(tau_s=tau, diffs={"roll": d}, sigmas={"roll": np.full(N, IFOV)}, lag_s=lag,
+                                    weight=np.full(N, 24.0)) for tau, d, lag in zip(TAUS, diffs, lags)]
+    settings = RestorationSettings(highpass_hz=2.0)          # "auto" is resolved from the product upstream
+    first = stages.integrate_differentials("roll", [], pds, np.zeros(N), settings, DT)
+    assert first.spectrum.tones is None
+
+    def searched(*args, **kwargs):
+        raise AssertionError("the blind-tone search ran")
+
+    monkeypatch.setattr(axis_integration, "blind_tones", searched)
+    again = stages.integrate_differentials("roll", [], pds, np.zeros(N), settings, DT, no_blind_tone=True)
+    np.testing.assert_array_equal(again.increment, first.increment)
+    with pytest.raises(AssertionError, match="search ran"):
+        stages.integrate_differentials("roll", [], pds, np.zeros(N), settings, DT)
