@@ -23,10 +23,11 @@ and both are known per line before any truth:
 For each cause and pair, the fit residual (the measured differentials minus
 those the integrated attitude predicts, :func:`restore.posterior.fit_residuals`),
 normalised by the current weights, is binned by the cause's covariate, its
-mean square per bin is made monotone in it (isotonic regression: a more
+robust mean square per bin is made monotone in it (isotonic regression: a more
 stretched window, a line closer to a gap, cannot match better), and a line's
 factor is the best bin's mean square over its own. Nothing is tuned per scene:
-where the residual does not grow with the covariate the factors stay near 1.
+where the residual does not grow with the covariate the factors stay near 1
+(a growth within three standard errors of a bin's estimate counts as none).
 """
 from __future__ import annotations
 
@@ -40,31 +41,45 @@ __all__ = ["window_stretch", "gap_distance", "isotonic_increasing", "residual_we
 COVARIATE_BINS = 20
 #: fewest usable lines per bin: fewer bins below 20 × this many lines, no weighting below 2 bins
 MIN_LINES_PER_BIN = 50
+#: median of the square of a standard normal variable (χ²₁'s median)
+GAUSS_MEDIAN_SQUARE = 0.454936
 
 
 def window_stretch(lag_lines: np.ndarray) -> np.ndarray:
     """Along-track stretch of band B's window relative to A's [lines per line]: ``|dλ/dl|``.
 
-    ``lag_lines`` (line,) or (pair, line): the per-line lag in lines; NaN
-    (no lag known) counts as 0. Central differences inside, one-sided at the
-    ends (:func:`numpy.gradient`).
+    ``lag_lines`` (line,) or (pair, line): the per-line lag in lines, NaN
+    where none is known (a gap). The mean of the differences to the previous
+    and the next line (a central difference), of the one that exists beside a
+    gap or at an end; 0 on a line with no known neighbour.
     """
-    lg = np.nan_to_num(np.asarray(lag_lines, dtype=np.float64))
+    lg = np.asarray(lag_lines, dtype=np.float64)
     if lg.shape[-1] < 2:
         return np.zeros_like(lg)
-    return np.abs(np.gradient(lg, axis=-1))
+    step = np.abs(np.diff(lg, axis=-1))
+    pad = np.full(lg.shape[:-1] + (1,), np.nan)
+    both = np.stack([np.concatenate([pad, step], axis=-1), np.concatenate([step, pad], axis=-1)])
+    n = np.isfinite(both).sum(axis=0)
+    return np.where(n > 0, np.nansum(both, axis=0) / np.maximum(n, 1), 0.0)
 
 
 def gap_distance(usable: np.ndarray) -> np.ndarray:
     """Lines from each line to the nearest unusable one, per row of ``usable`` ((line,) or (pair, line)).
 
-    0 on an unusable line; a row without any gap gets its length (the record's
-    ends are not gaps).
+    0 on an unusable line; the record's ends are not gaps, nor the unusable
+    lines that run to them (a pair's last τ/Te lines, whose partner lies
+    beyond the record): a row without an inner gap gets its length.
     """
     u = np.atleast_2d(np.asarray(usable, dtype=bool))
     out = np.empty(u.shape)
     for j, row in enumerate(u):
-        out[j] = distance_transform_edt(row) if not row.all() else row.size
+        inner = row.copy()
+        idx = np.flatnonzero(row)
+        if idx.size:
+            inner[:idx[0]] = True
+            inner[idx[-1] + 1:] = True
+        out[j] = distance_transform_edt(inner) if not inner.all() else row.size
+        out[j][~row] = 0.0
     return out.reshape(np.shape(usable))
 
 
@@ -151,9 +166,15 @@ def residual_weight_factors(residuals: np.ndarray, covariate: np.ndarray, usable
         groups = np.array_split(np.argsort(x[ok], kind="stable"), nb)
         rr, xx = r[j][ok], x[ok]
         centre = np.array([np.median(xx[g]) for g in groups])
-        v = isotonic_increasing(np.array([np.mean(rr[g] ** 2) for g in groups]),
+        # a robust mean square per bin (median of r² over its median for a Gaussian, 0.455): a cluster of a few
+        # gross lines must not inflate a bin and, through the pooling, every bin above it
+        v = isotonic_increasing(np.array([np.median(rr[g] ** 2) / GAUSS_MEDIAN_SQUARE for g in groups]),
                                 np.array([g.size for g in groups], dtype=np.float64))
         if not v[0] > 0:
             continue
-        out[j] = v[0] / np.interp(x, centre, v)
+        # a bin's robust mean square scatters by ≈ √(2 / (0.64 m)) over m lines (a median is 64 % efficient):
+        # growth within 3 of those is noise, and left at 1
+        ratio = v / v[0]
+        ratio = np.where(ratio > 1.0 + 3.0 * np.sqrt(2.0 / (0.64 * min(g.size for g in groups))), ratio, 1.0)
+        out[j] = np.where(np.isfinite(x), 1.0 / np.interp(np.nan_to_num(x), centre, ratio), 1.0)
     return out

@@ -223,9 +223,8 @@ def _band_edges(n: int, bands: int = CHECK_BANDS, min_bins: int = CHECK_BAND_BIN
     a band spans half its start bin (one bin, one, two, two, three, …): the
     integration amplifies noise as ``1 / (2π f τ)``, so the few lowest bins
     weigh most in the restored angle, and a slow excess of the matching error
-    there (common to a line's points, 3-10× the white level in power at
-    0.6-2 Hz on low_frequencies) would be diluted in a 16-bin band. A narrow
-    band's excess must be larger to count (:func:`noise_colour_from_check`).
+    there would be diluted in a 16-bin band. A narrow band's excess must be
+    larger to count (:func:`noise_colour_from_check`: ≈ 11 × in one bin).
     """
     nf = n // 2 + 1
     growth = (nf / min_bins) ** (1.0 / max(int(bands), 1))
@@ -246,16 +245,21 @@ def band_power(residuals: np.ndarray, edges: list) -> np.ndarray:
     return np.array([[per[j, a:b].mean() for a, b in zip(edges[:-1], edges[1:])] for j in range(r.shape[0])])
 
 
-#: a band's real residual power must exceed the simulated one by this many standard deviations of a
-#: periodogram mean (1 / √bins) before its noise is raised
-CHECK_SIGMAS = 3.5
+#: chance, per pair, that the check raises some band of a noise the white model describes (Bonferroni over its bands)
+CHECK_FALSE_ALARM = 0.02
 
 
 def noise_colour_from_check(real: np.ndarray, simulated: np.ndarray, edges: list, n: int, *,
-                            limit: float = 64.0) -> np.ndarray:
+                            limit: float = 64.0, draws: int = 8) -> np.ndarray:
     """Per pair and frequency of ``rfftfreq(n)``: the factor on the noise power that makes the white model's
-    fit residuals as large as the real ones, band by band (≥ 1; 1 unless the excess is significant:
-    ``NOISE_CHECK_TOLERANCE²`` and :data:`CHECK_SIGMAS` times a band mean's scatter).
+    fit residuals as large as the real ones, band by band (≥ 1; 1 unless the excess is significant).
+
+    A band of ``b`` periodogram bins averages ``b`` exponential variables, and
+    the simulated power averages ``draws × b``: under the model their ratio
+    follows Fisher's F(2b, 2·draws·b). A band counts when its ratio exceeds
+    that law's quantile at :data:`CHECK_FALSE_ALARM` over the pair's bands
+    (and ``NOISE_CHECK_TOLERANCE²``): a one-bin band must show ≈ 11 × the
+    modelled power, a 16-bin one ≈ 2 ×.
 
     Matching errors are not white (they rise 3-4× in power towards 1-5 Hz on
     phr_cmg: windows that share rows, texture features seen by neighbouring
@@ -263,8 +267,11 @@ def noise_colour_from_check(real: np.ndarray, simulated: np.ndarray, edges: list
     frequency) leave residual power the white model does not have: both are
     error the restored angle carries, so the draws get it too.
     """
+    from scipy.stats import f as fisher
+
     bins = np.diff(np.asarray(edges, dtype=np.float64))
-    tolerance = np.maximum(NOISE_CHECK_TOLERANCE ** 2, 1.0 + CHECK_SIGMAS / np.sqrt(bins))[None, :]
+    quantile = fisher.isf(CHECK_FALSE_ALARM / max(bins.size, 1), 2.0 * bins, 2.0 * max(int(draws), 1) * bins)
+    tolerance = np.maximum(NOISE_CHECK_TOLERANCE ** 2, quantile)[None, :]
     ratio = np.where(simulated > 0, real / np.maximum(simulated, 1e-300), 1.0)
     ratio = np.where(np.isfinite(ratio) & (ratio > tolerance), ratio, 1.0)
     ratio = np.clip(ratio, 1.0, limit)
@@ -372,7 +379,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     if check_noise:
         real = band_power(fit_residuals(d, np.asarray(record.increment, dtype=np.float64), taus, record.lags_s, dt,
                                         highpass_hz=record.highpass_hz), edges)
-        colour = noise_colour_from_check(real, np.mean(sim, axis=0), edges, n)
+        colour = noise_colour_from_check(real, np.mean(sim, axis=0), edges, n, draws=len(sim))
         if np.any(colour > 1.0):
             scale = float(np.sqrt(np.mean(colour)))
             errs, _ = run(colour, samples, False)

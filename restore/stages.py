@@ -483,17 +483,21 @@ def line_weight_factors(differentials: list, records: dict, settings: Restoratio
         # where the prior holds the signal back, which grows with the stretch too (small_detector's roll
         # 0.035 → 0.044 px weighted)
         return out
-    stretch = np.array([window_stretch(np.asarray(d.lag_s, dtype=np.float64) / line_period_s)
-                        for d in differentials])
-    base = np.array([d.weight for d in differentials], dtype=np.float64)
+    lag_lines = np.array([np.asarray(d.lag_s, dtype=np.float64) / line_period_s for d in differentials])
     for a, rec in records.items():
+        if not integration_method(rec.method).line_weights:
+            continue                    # a method that ignores line weights: nothing to gain
         d = np.asarray(rec.diffs, dtype=np.float64)
+        base = np.asarray(rec.weights, dtype=np.float64)     # what the residual was fitted with
         res = fit_residuals(d, np.asarray(rec.increment, dtype=np.float64), [float(t) for t in rec.taus],
                             rec.lags_s, line_period_s, highpass_hz=rec.highpass_hz)
         usable = np.isfinite(res) & np.isfinite(d) & (base > 0)
+        # no lag is measured in a gap (line_lag's zeros there are no stretch)
+        f = residual_weight_factors(res, window_stretch(np.where(np.isfinite(d), lag_lines, np.nan)), usable, base)
         # the gaps are the stretches left unfilled (cloud, water, no texture), not a failed line filled over
-        f = residual_weight_factors(res, stretch, usable, base)
         f = f * residual_weight_factors(res, gap_distance(np.isfinite(d)), usable, base * f, increasing=False)
+        if np.all(f == 1.0):
+            continue
         for j in range(len(differentials)):
             out[j][a] = f[j]
     return out

@@ -246,10 +246,28 @@ def test_the_noise_check_resolves_the_lowest_frequencies_bin_by_bin():
     assert np.all(widths >= 1) and widths[-2] >= CHECK_BAND_BINS
     sim = np.ones((3, len(edges) - 1))                       # the white model's residual power per band
     real = sim.copy()
-    real[:, :3] = 10.0                                       # a slow excess in bins 1-3, 10× the white power
+    real[:, :3] = 30.0                                       # a slow excess in bins 1-3, 30× the white power
     colour = noise_colour_from_check(real, sim, edges, n)
-    np.testing.assert_allclose(colour[:, 1:4], 10.0)          # found where it is, at its level
+    np.testing.assert_allclose(colour[:, 1:4], 30.0)          # found where it is, at its level
     assert np.all(colour[:, 8:] < 1.0 + 1e-12)                # and not spread beyond
-    # 1.1× in a one-bin band is within a periodogram's scatter: not counted
-    real[:, :3] = 1.1
-    assert np.all(noise_colour_from_check(real, sim, edges, n) == 1.0)
+    # 5× in a one-bin band is within a periodogram's scatter (exponential), 5× over 16 bins is not
+    real[:, :3] = 5.0
+    assert np.all(noise_colour_from_check(real, sim, edges, n)[:, 1:4] == 1.0)
+    wide = [1, 17, n // 2 + 1]
+    assert noise_colour_from_check(np.array([[5.0, 1.0]]), np.ones((1, 2)), wide, n)[0, 5] > 4.0
+
+
+def test_the_check_rarely_raises_a_band_of_a_noise_the_model_describes():
+    """Under the white model (real and simulated residuals both white), a pair gets some band raised in about
+    CHECK_FALSE_ALARM of the records."""
+    from restore.posterior import CHECK_FALSE_ALARM, _band_edges, band_power, noise_colour_from_check
+
+    n, draws, trials = 1000, 8, 400
+    edges = _band_edges(n)
+    rng = np.random.default_rng(21)
+    raised = 0
+    for _ in range(trials):
+        real = band_power(rng.standard_normal((1, n)), edges)
+        sim = np.mean([band_power(rng.standard_normal((1, n)), edges) for _ in range(draws)], axis=0)
+        raised += bool(np.any(noise_colour_from_check(real, sim, edges, n, draws=draws) > 1.0))
+    assert raised / trials < 3 * CHECK_FALSE_ALARM + 0.01
