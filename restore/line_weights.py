@@ -23,7 +23,7 @@ and both are known per line before any truth:
 For each cause and pair, the fit residual (the measured differentials minus
 those the integrated attitude predicts, :func:`restore.posterior.fit_residuals`),
 normalised by the current weights, is binned by the cause's covariate, its
-robust mean square per bin is made monotone in it (isotonic regression: a more
+mean square per bin is made monotone in it (isotonic regression: a more
 stretched window, a line closer to a gap, cannot match better), and a line's
 factor is the best bin's mean square over its own. Nothing is tuned per scene:
 where the residual does not grow with the covariate the factors stay near 1
@@ -41,8 +41,6 @@ __all__ = ["window_stretch", "gap_distance", "isotonic_increasing", "residual_we
 COVARIATE_BINS = 20
 #: fewest usable lines per bin: fewer bins below 20 × this many lines, no weighting below 2 bins
 MIN_LINES_PER_BIN = 50
-#: median of the square of a standard normal variable (χ²₁'s median)
-GAUSS_MEDIAN_SQUARE = 0.454936
 
 
 def window_stretch(lag_lines: np.ndarray) -> np.ndarray:
@@ -166,15 +164,16 @@ def residual_weight_factors(residuals: np.ndarray, covariate: np.ndarray, usable
         groups = np.array_split(np.argsort(x[ok], kind="stable"), nb)
         rr, xx = r[j][ok], x[ok]
         centre = np.array([np.median(xx[g]) for g in groups])
-        # a robust mean square per bin (median of r² over its median for a Gaussian, 0.455): a cluster of a few
-        # gross lines must not inflate a bin and, through the pooling, every bin above it
-        v = isotonic_increasing(np.array([np.median(rr[g] ** 2) / GAUSS_MEDIAN_SQUARE for g in groups]),
+        # the mean square, not a robust scale: a linear estimate's error grows with the variance, tails included
+        # (with a median per bin large_amplitude's pitch 0.045 → 0.050 px: the stretched lines' errors are
+        # heavy-tailed); a cluster of gross lines the despiker keeps raises its bin
+        v = isotonic_increasing(np.array([np.mean(rr[g] ** 2) for g in groups]),
                                 np.array([g.size for g in groups], dtype=np.float64))
         if not v[0] > 0:
             continue
-        # a bin's robust mean square scatters by ≈ √(2 / (0.64 m)) over m lines (a median is 64 % efficient):
-        # growth within 3 of those is noise, and left at 1
+        # a bin's mean square scatters by ≈ √(2 / m) over m Gaussian lines: growth within 3 of those is noise,
+        # and left at 1
         ratio = v / v[0]
-        ratio = np.where(ratio > 1.0 + 3.0 * np.sqrt(2.0 / (0.64 * min(g.size for g in groups))), ratio, 1.0)
+        ratio = np.where(ratio > 1.0 + 3.0 * np.sqrt(2.0 / min(g.size for g in groups)), ratio, 1.0)
         out[j] = np.where(np.isfinite(x), 1.0 / np.interp(np.nan_to_num(x), centre, ratio), 1.0)
     return out
