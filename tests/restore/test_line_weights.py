@@ -57,7 +57,7 @@ def test_too_few_lines_or_unusable_lines_keep_the_weights():
     rng = np.random.default_rng(5)
     s = rng.uniform(0.0, 2.0, (1, 80))
     r = rng.standard_normal((1, 80)) * (1 + 10 * s)
-    np.testing.assert_array_equal(residual_weight_factors(r, s), 1.0)          # < 2 bins of 50 lines
+    np.testing.assert_array_equal(residual_weight_factors(r, s), 1.0)          # < 10 bins of 50 lines
     s = rng.uniform(0.0, 2.0, (1, 4000))
     r = rng.standard_normal((1, 4000)) * (1 + 10 * s)
     usable = np.zeros((1, 4000), dtype=bool)
