@@ -209,7 +209,7 @@ class Restorer:
             # a line whose bands' windows are stretched against each other, or that lies next to a gap, matches
             # worse: weigh it by how its pair's fit residual grows with that, and integrate again
             factors = stages.line_weight_factors(differentials, recs, s, te)
-            if any(f for f in factors):
+            if any(factors):
                 for d, fac in zip(differentials, factors):
                     d.axis_factor = fac
                 # reweighting does not make a tone appear: where the search found none, it is not run again
