@@ -483,7 +483,6 @@ def line_weight_factors(differentials: list, records: dict, settings: Restoratio
         # where the prior holds the signal back, which grows with the stretch too (small_detector's roll
         # 0.035 → 0.044 px weighted)
         return out
-    lag_lines = np.array([np.asarray(d.lag_s, dtype=np.float64) / line_period_s for d in differentials])
     for a, rec in records.items():
         if not integration_method(rec.method).line_weights:
             continue                    # a method that ignores line weights: nothing to gain
@@ -493,6 +492,7 @@ def line_weight_factors(differentials: list, records: dict, settings: Restoratio
                             rec.lags_s, line_period_s, highpass_hz=rec.highpass_hz)
         usable = np.isfinite(res) & np.isfinite(d) & (base > 0)
         # no lag is measured in a gap (line_lag's zeros there are no stretch)
+        lag_lines = np.asarray(rec.lags_s, dtype=np.float64) / line_period_s     # the record holds the pairs' lags
         f = residual_weight_factors(res, window_stretch(np.where(np.isfinite(d), lag_lines, np.nan)), usable, base)
         # the gaps are the stretches left unfilled (cloud, water, no texture), not a failed line filled over
         f = f * residual_weight_factors(res, gap_distance(np.isfinite(d)), usable, base * f, increasing=False)
