@@ -37,6 +37,15 @@ the noise's power raised there by the ratio (:func:`noise_colour_from_check`),
 so the prediction inherits neither an optimistic level nor an optimistic
 colour.
 
+The pairs' noises are not independent: pair ``A/B`` compares band B's line
+with band A's, so a band's own matching error (its image noise, its texture
+through its own spectrum) enters every pair that uses the band. What the
+bands' errors have in common moves all of them like an attitude would and
+passes into the restored angle, unseen by the residual. The share of each
+pair's noise that is a shared band's is measured from the real residuals
+(:func:`shared_band_noise`) and the draws give each band one draw of it
+(:func:`correlated_noise`).
+
 Below the high-pass, the AOCS knowledge's own noise (recorded in the product)
 adds ``σ_k² · 2 f_hp / f_k`` (white noise at the knowledge rate ``f_k``).
 """
@@ -53,7 +62,8 @@ from .synthesis import highpass_gain, highpass_nan
 
 __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", "simulated_differentials",
            "fit_residual_rms", "fit_residuals", "band_power", "noise_colour_from_check", "coloured_noise",
-           "knowledge_noise_below", "detrended", "detrended_rms", "detrended_rms_over"]
+           "knowledge_noise_below", "band_times", "SharedBandNoise", "shared_band_noise", "correlated_noise",
+           "detrended", "detrended_rms", "detrended_rms_over"]
 
 
 #: the real fit residual may exceed the simulated one by this factor before the noise is inflated
@@ -291,6 +301,143 @@ def coloured_noise(sigma: np.ndarray, colour: np.ndarray | None, rng: np.random.
     return np.nan_to_num(sigma) * w
 
 
+def band_times(pairs, taus) -> tuple[list, np.ndarray] | None:
+    """Each band's time offset [s] from the pairs ``"A/B"`` (B sees A's ground ``τ`` later), least squares.
+
+    Returns ``(bands, offsets)`` with the first band at 0; None when a name is
+    not ``"A/B"`` or the pairs do not tie all their bands together.
+    """
+    names = [str(p) for p in pairs]
+    if any(p.count("/") != 1 for p in names):
+        return None
+    ends = [tuple(p.split("/")) for p in names]
+    bands = sorted({b for e in ends for b in e}, key=[b for e in ends for b in e].index)
+    m = np.zeros((len(ends) + 1, len(bands)))
+    for j, (a, b) in enumerate(ends):
+        m[j, bands.index(a)], m[j, bands.index(b)] = -1.0, 1.0
+    m[-1, 0] = 1.0                                       # the first band at 0
+    rhs = np.append(np.asarray(taus, dtype=np.float64), 0.0)
+    if np.linalg.matrix_rank(m) < len(bands):
+        return None
+    return bands, np.linalg.lstsq(m, rhs, rcond=None)[0]
+
+
+@dataclass
+class SharedBandNoise:
+    """The part of the pairs' noise that comes from a band two pairs share (see :func:`shared_band_noise`).
+
+    Attributes
+    ----------
+    terms : list of (band, [(pair, sign, offset_lines)])
+        Each shared band, with the pairs that see it, the sign it enters
+        their differential with (+1 behind, −1 ahead) and where in the pair's
+        record the band's sample lies [lines after the pair's line].
+    fraction : ndarray (band, pair, lines // 2 + 1)
+        Share of the pair's noise power that is the band's, per frequency of
+        ``rfftfreq(lines, Δt)`` (0 where the pair does not see the band).
+    """
+
+    terms: list
+    fraction: np.ndarray
+
+
+#: lag window [lines] of the smoothed spectra behind :func:`shared_band_noise` (its frequency resolution is
+#: ``1 / (SHARED_LAG_LINES Δt)``: matching errors of neighbouring lines are correlated over a few lines only)
+SHARED_LAG_LINES = 16
+#: the pairs' own noise keeps at least this share of their power
+SHARED_MAX_FRACTION = 0.9
+
+
+def shared_band_noise(residuals: np.ndarray, pairs, taus, dt: float) -> SharedBandNoise | None:
+    """How much of each pair's noise is the matching error of a band it shares with another pair.
+
+    Pair ``A/B`` measures the location of B's sample against A's, so an error
+    in band B's image (its noise, its texture seen through its own spectrum)
+    enters every pair that uses B, at B's sample time: the pairs' noises are
+    correlated. Across the bands such errors are partly common, and a common
+    error is indistinguishable from the attitude: it passes into the restored
+    angle, while the fit residual, which only sees what the pairs disagree
+    on, cannot show it. Independent pair noise of the same level therefore
+    predicts too small an error (measured on phr_cmg: the pairs that share
+    their ahead band B1 correlate 0.35 in pitch at zero lag).
+
+    The shared band's power is the cross-spectrum of the two pairs' fit
+    residuals once each is moved to the band's sample time and given the sign
+    the band enters with; smoothed over ``n / SHARED_LAG_LINES`` bins and
+    averaged over the couples of pairs sharing the band, over each pair's
+    own (smoothed) residual power, it is the share of that pair's noise.
+    Negative estimates count as 0.
+
+    Returns None when the pair names do not give the bands, or no band is
+    seen by two pairs.
+    """
+    r = np.asarray(residuals, dtype=np.float64)
+    tb = band_times(pairs, taus)
+    if tb is None or r.shape[0] < 2:
+        return None
+    bands, times = tb
+    ends = [tuple(str(p).split("/")) for p in pairs]
+    n = r.shape[1]
+    ok = np.isfinite(r)
+    spec = rfft(np.where(ok, r, 0.0), axis=-1)
+    freq = np.fft.rfftfreq(n, dt)
+    width = max(1, int(round(n / SHARED_LAG_LINES / 2)) * 2 + 1)
+
+    def smooth(x):
+        return uniform_filter1d(x, width, mode="nearest")
+
+    own = np.array([smooth(np.abs(spec[j]) ** 2) / max(ok[j].sum(), 1) for j in range(r.shape[0])])
+    terms, shares = [], []
+    for x, band in enumerate(bands):
+        seen = [(j, 1.0 if b == band else -1.0, (times[x] - times[bands.index(a)]) / dt)
+                for j, (a, b) in enumerate(ends) if band in (a, b)]
+        if len(seen) < 2:
+            continue
+        cross = []
+        for i in range(len(seen)):
+            for k in range(i + 1, len(seen)):
+                (j, sj, oj), (m, sm, om) = seen[i], seen[k]
+                c = spec[j] * np.conj(spec[m]) * np.exp(-2j * np.pi * freq * (oj - om) * dt) * sj * sm
+                both = max(min(ok[j].sum(), ok[m].sum()), 1)
+                cross.append(smooth(c.real) / both)
+        power = np.maximum(np.mean(cross, axis=0), 0.0)
+        frac = np.zeros((r.shape[0], freq.size))
+        for j, _, _ in seen:
+            frac[j] = np.where(own[j] > 0, power / np.maximum(own[j], 1e-300), 0.0)
+        terms.append((band, seen))
+        shares.append(frac)
+    if not terms:
+        return None
+    fraction = np.array(shares)
+    total = fraction.sum(axis=0)
+    fraction *= np.where(total > SHARED_MAX_FRACTION, SHARED_MAX_FRACTION / np.maximum(total, 1e-300), 1.0)[None]
+    return SharedBandNoise(terms=terms, fraction=fraction)
+
+
+def correlated_noise(sigma: np.ndarray, colour: np.ndarray | None, shared: SharedBandNoise | None,
+                     dt: float, rng: np.random.Generator) -> np.ndarray:
+    """Noise of per-line σ ``sigma`` (pair, line) with the power spectrum scaled by ``colour`` and the share
+    ``shared`` of it common to the pairs that see the same band (:func:`shared_band_noise`).
+
+    Without ``shared`` it is :func:`coloured_noise`. Each band's part is one
+    white draw, moved to the pair's sample of the band (a phase, so a
+    fraction of a line is kept) and signed as the band enters the pair.
+    """
+    if shared is None:
+        return coloured_noise(sigma, colour, rng)
+    p, n = sigma.shape
+    freq = np.fft.rfftfreq(n, dt)
+    own = np.sqrt(np.clip(1.0 - shared.fraction.sum(axis=0), 0.0, 1.0))
+    spec = rfft(rng.standard_normal((p, n)), axis=-1) * own
+    for (_, seen), frac in zip(shared.terms, shared.fraction):
+        u = rfft(rng.standard_normal(n))
+        for j, sign, offset in seen:
+            spec[j] += sign * np.sqrt(frac[j]) * u * np.exp(2j * np.pi * freq * offset * dt)
+    if colour is not None:
+        spec = spec * np.sqrt(colour)
+    return np.nan_to_num(sigma) * irfft(spec, n=n, axis=-1)
+
+
 def knowledge_noise_below(n: int, dt: float, highpass_hz: float, noise_rad: float, rate_hz: float,
                           rng: np.random.Generator) -> np.ndarray:
     """One draw of the AOCS knowledge noise the images leave uncorrected: below the high-pass [rad].
@@ -308,7 +455,7 @@ def knowledge_noise_below(n: int, dt: float, highpass_hz: float, noise_rad: floa
 
 def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: int = 31,
                     check_noise: bool = True, knowledge_noise_rad: float = 0.0,
-                    knowledge_rate_hz: float | None = None) -> PosteriorSigma:
+                    knowledge_rate_hz: float | None = None, shared_bands: bool = True) -> PosteriorSigma:
     """Predicted 1-σ per line of one axis's restored angle (see the module's docstring).
 
     Parameters
@@ -349,7 +496,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     ext = n + int(np.ceil((max(taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
     rng = np.random.default_rng(seed)
 
-    def run(colour, k: int, check: bool):
+    def run(colour, k: int, check: bool, shared=None):
         errs, resid = [], []
         for _ in range(k):
             if record.highpass_hz > 0:
@@ -358,7 +505,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
             else:
                 th = prior_draw(freq, psd, ext, dt, rng)
                 ref = th[:n]
-            ds = simulated_differentials(th, taus, lags, valid, dt) + coloured_noise(noise, colour, rng)
+            ds = simulated_differentials(th, taus, lags, valid, dt) + correlated_noise(noise, colour, shared, dt, rng)
             est = record.rerun(ds, first_stage_gcv=False)
             e = est - ref
             if knowledge_noise_rad > 0 and knowledge_rate_hz:
@@ -375,14 +522,16 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     edges = _band_edges(n)
     errs, sim = run(None, samples, check_noise)
     scale = 1.0
-    colour = None
+    colour = shared = None
     if check_noise:
-        real = band_power(fit_residuals(d, np.asarray(record.increment, dtype=np.float64), taus, record.lags_s, dt,
-                                        highpass_hz=record.highpass_hz), edges)
+        resid = fit_residuals(d, np.asarray(record.increment, dtype=np.float64), taus, record.lags_s, dt,
+                              highpass_hz=record.highpass_hz)
+        real = band_power(resid, edges)
         colour = noise_colour_from_check(real, np.mean(sim, axis=0), edges, n, draws=len(sim))
-        if np.any(colour > 1.0):
+        shared = shared_band_noise(resid, getattr(record, "pairs", None) or [], taus, dt) if shared_bands else None
+        if np.any(colour > 1.0) or shared is not None:
             scale = float(np.sqrt(np.mean(colour)))
-            errs, _ = run(colour, samples, False)
+            errs, _ = run(colour, samples, False, shared)
     return PosteriorSigma(sigma=np.sqrt(_line_variance(errs, smooth_lines)), noise_scale=float(scale),
                           samples=int(samples), noise_colour=colour, detrended_rms=detrended_rms(errs),
                           detrended_sigma=np.sqrt(_line_variance(detrended(errs), smooth_lines)))
