@@ -464,9 +464,10 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
     for a, d in unc.items():
         rows.append([_e(a), _fmt(d["predicted_rms"] / ifov), _fmt(d.get("actual_rms", np.nan) / ifov),
                      _fmt(d.get("ratio", np.nan), 2), _fmt(d.get("within_2sigma", np.nan) * 100, 1),
-                     str(int(d["flagged"].sum())), _fmt(d["noise_scale"], 2)])
+                     str(int(d["flagged"].sum())), _fmt(d["noise_scale"], 2),
+                     _e(", ".join(f"{b} {v:.2f}" for b, v in d.get("band_shares", {}).items()) or "—")])
     pg.table(["axis", "predicted RMS σ [px]", "actual RMS [px]", "actual / predicted", "lines within 2σ [%]",
-              "flagged lines", "noise inflation"], rows)
+              "flagged lines", "noise inflation", "band's share of its pairs' noise"], rows)
     for a, d in unc.items():
         fig, axs = RP.uncertainty_figure()
         RP.draw_uncertainty(axs, d, a, ifov_rad=ifov)

@@ -54,7 +54,7 @@ adds ``σ_k² · 2 f_hp / f_k`` (white noise at the knowledge rate ``f_k``).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.fft import irfft, next_fast_len, rfft
@@ -107,6 +107,9 @@ class PosteriorSigma:
     #: per line, the 1-σ of the draws' errors without their trend [rad] (NaN where not restored), so that the
     #: detrended RMS can be taken over the lines finally restored (:func:`detrended_rms_over`)
     detrended_sigma: np.ndarray | None = None
+    #: per band two pairs share: the share of its pairs' noise power that is the band's own matching error
+    #: (mean over the pairs that see it and over frequency; :func:`shared_band_noise`); empty when none
+    band_shares: dict = field(default_factory=dict)
 
 
 def detrended(errors: np.ndarray) -> np.ndarray:
@@ -369,6 +372,11 @@ class SharedBandNoise:
     terms: list
     fraction: np.ndarray
 
+    def band_shares(self) -> dict:
+        """``{band: share}``: each band's share of its pairs' noise power, mean over those pairs and frequency."""
+        return {band: float(np.mean([self.fraction[x, j].mean() for j, _, _ in seen]))
+                for x, (band, seen) in enumerate(self.terms)}
+
 
 #: lag window [lines] of the smoothed spectra behind :func:`shared_band_noise` (its frequency resolution is
 #: ``1 / (SHARED_LAG_LINES Δt)``: matching errors of neighbouring lines are correlated over a few lines only)
@@ -585,7 +593,8 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
         errs, _ = run(estimate, samples, False, shared)
     return PosteriorSigma(sigma=np.sqrt(_line_variance(errs, smooth_lines)), noise_scale=float(scale),
                           samples=int(samples), noise_colour=colour, detrended_rms=detrended_rms(errs),
-                          detrended_sigma=np.sqrt(_line_variance(detrended(errs), smooth_lines)))
+                          detrended_sigma=np.sqrt(_line_variance(detrended(errs), smooth_lines)),
+                          band_shares=shared.band_shares() if shared is not None else {})
 
 
 def _line_variance(errs: np.ndarray, smooth_lines: int) -> np.ndarray:

@@ -228,6 +228,8 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
     for a, sg in res.sigma.items():
         data[f"sigma_{a}"] = ("time", sg, {"units": "rad", "long_name": f"predicted 1-sigma of the restored {a}",
                                            "noise_scale": float(res.noise_scale.get(a, 1.0)),
+                                           "band_noise_shares": json.dumps(res.band_shares.get(a, {}),
+                                                                           sort_keys=True),
                                            "predicted_detrended_rms_rad": float(res.detrended_rms.get(a, np.nan)),
                                            "flag_limit_rad": sigma_limit(sg, res.settings.max_sigma_px,
                                                                          res.pixel_ifov_rad)})
@@ -323,6 +325,8 @@ def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult
                      if f"sigma_{a}" in ds.variables},
         detrended_rms={a: float(ds[f"sigma_{a}"].attrs.get("predicted_detrended_rms_rad", np.nan)) for a in AXES
                        if f"sigma_{a}" in ds.variables},
+        band_shares={a: json.loads(ds[f"sigma_{a}"].attrs.get("band_noise_shares", "{}")) for a in AXES
+                     if f"sigma_{a}" in ds.variables},
         yaw_pitch_coupling=float(ds.attrs.get("yaw_pitch_coupling", 0.0)),
         yaw_roll_coupling=float(ds.attrs.get("yaw_roll_coupling", 0.0)))
 

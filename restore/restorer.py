@@ -129,6 +129,7 @@ class Restorer:
                                  anchored=anchored, corrected=corrected,
                                  sigma={a: ps.sigma for a, ps in sigma.items()}, flagged=flagged,
                                  noise_scale={a: ps.noise_scale for a, ps in sigma.items()},
+                                 band_shares={a: ps.band_shares for a, ps in sigma.items()},
                                  detrended_rms={a: detrended_rms_over(ps, restored[a]) for a, ps in sigma.items()},
                                  yaw_pitch_coupling=stages.yaw_pitch_coupling(pairs),
                                  yaw_roll_coupling=stages.yaw_coupling(pairs, "roll"))

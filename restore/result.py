@@ -129,6 +129,9 @@ class RestorationResult:
     #: per restored axis: predicted RMS error [rad] once the record's trend (offset and slope, which no
     #: pair sees) is removed (:attr:`restore.posterior.PosteriorSigma.detrended_rms`)
     detrended_rms: dict = field(default_factory=dict)
+    #: per restored axis: ``{band: share}`` of its pairs' noise that is the band's own matching error
+    #: (:attr:`restore.posterior.PosteriorSigma.band_shares`)
+    band_shares: dict = field(default_factory=dict)
     #: along-track motion of a yaw relative to a pitch (tan of the off-nadir roll): the restored pitch is
     #: pitch + this × the yaw the AOCS knowledge misses (:func:`restore.stages.yaw_pitch_coupling`)
     yaw_pitch_coupling: float = 0.0

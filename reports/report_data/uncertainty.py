@@ -1,6 +1,8 @@
 """Run report data: the predicted 1-σ per line against the actual error (see :mod:`reports.report_data`)."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from .headline import attitude_table, restored_axes
@@ -42,7 +44,7 @@ def uncertainty(run: RunData) -> dict:
     Returns
     -------
     dict
-        ``{axis: {time_s, sigma, flagged, flag_limit, predicted_rms, noise_scale,
+        ``{axis: {time_s, sigma, flagged, flag_limit, predicted_rms, noise_scale, band_shares,
         [error, actual_rms, ratio, within_2sigma, calibration]}}``; empty when
         the restoration carries no predicted σ (``posterior_samples = 0``).
     """
@@ -60,6 +62,7 @@ def uncertainty(run: RunData) -> dict:
         d = {"time_s": att["time_s"], "sigma": sg, "flagged": fl,
              "flag_limit": float(rest[f"sigma_{a}"].attrs.get("flag_limit_rad", np.nan)),
              "noise_scale": float(rest[f"sigma_{a}"].attrs.get("noise_scale", 1.0)),
+             "band_shares": json.loads(rest[f"sigma_{a}"].attrs.get("band_noise_shares", "{}")),
              "predicted_rms": float(np.sqrt(np.mean(sg[valid] ** 2))) if valid.any() else float("nan")}
         if f"error_{a}" in att:
             e = np.where(valid, att[f"error_{a}"], np.nan)

@@ -323,6 +323,7 @@ def test_restoration_round_trips_through_its_file(tiny_restored):
         np.testing.assert_array_equal(back.sigma[a], res.sigma[a])
         np.testing.assert_array_equal(back.flagged[a], res.flagged[a])
         assert back.noise_scale[a] == res.noise_scale[a]
+        assert back.band_shares[a] == pytest.approx(res.band_shares[a])
         assert back.detrended_rms[a] == res.detrended_rms[a] and 0 < res.detrended_rms[a] < np.inf
 
 

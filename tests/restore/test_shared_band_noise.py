@@ -156,3 +156,12 @@ def test_the_residual_of_the_fit_carries_the_shared_part():
     sh = shared_band_noise(r, rec.pairs, rec.taus, DT)
     # 2 × 48.5 % of each pair's noise is shared, capped at SHARED_MAX_FRACTION: 45 % per band
     assert sh.fraction.max(axis=0).mean() == pytest.approx(0.45, abs=0.05)
+
+
+def test_the_posterior_reports_each_bands_share():
+    """What the Monte Carlo used is reported: each shared band's share of its pairs' noise (≈ 45 % here)."""
+    rec, _ = _record(9, 0.2e-6, 0.05e-6)
+    shares = posterior_sigma(rec, samples=4, seed=1).band_shares
+    assert set(shares) == {"a", "b", "c"}
+    assert all(v == pytest.approx(0.45, abs=0.06) for v in shares.values())
+    assert posterior_sigma(rec, samples=4, seed=1, shared_bands=False).band_shares == {}
