@@ -463,8 +463,8 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
     rows = []
     for a, d in unc.items():
         rows.append([_e(a), _fmt(d["predicted_rms"] / ifov), _fmt(d.get("actual_rms", np.nan) / ifov),
-                     _fmt(d.get("ratio", np.nan), 2), _fmt(d.get("within_2sigma", np.nan) * 100, 1),
-                     str(int(d["flagged"].sum())), _fmt(d["noise_scale"], 2),
+                     _fmt(d.get("ratio", np.nan), 3), _fmt(d.get("within_2sigma", np.nan) * 100, 3),
+                     str(int(d["flagged"].sum())), _fmt(d["noise_scale"], 3),
                      _e(", ".join(f"{b} {v:.2f}" for b, v in d.get("band_shares", {}).items()) or "—")])
     pg.table(["axis", "predicted RMS σ [px]", "actual RMS [px]", "actual / predicted", "lines within 2σ [%]",
               "flagged lines", "noise inflation", "band's share of its pairs' noise"], rows)
