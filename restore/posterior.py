@@ -585,7 +585,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
         real = band_power(resid, edges)
         colour = noise_colour_from_check(real, np.mean(sim, axis=0), edges, n, draws=len(sim))
         scale = float(np.sqrt(np.mean(colour)))
-        shared = (shared_band_noise(resid, getattr(record, "pairs", None) or [], taus, dt, lags=record.lags_s)
+        shared = (shared_band_noise(resid, record.pairs, taus, dt, lags=record.lags_s)
                   if shared_bands else None)
         if shared is not None:   # the residual of the model with shared bands is smaller: compare with that one
             _, sim = run(None, samples, True, shared)
