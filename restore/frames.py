@@ -37,7 +37,7 @@ from .errors import RestorationError
 from .matching import match_points
 
 __all__ = ["FrameRestoration", "restore_frames", "frame_pair_matches", "solve_frame_attitudes",
-           "frames_restoration_dataset"]
+           "frames_restoration_dataset", "frames_restoration_from_dataset"]
 
 #: point grid of a frame pair: one point every this many rows / columns, this far from the edges
 _STEP = (8, 16)
@@ -329,3 +329,44 @@ def frames_restoration_dataset(res: FrameRestoration):
                       attrs={"title": "simsat restoration (frames)", "acquisition": "frames",
                              "method": "frames_lsq", "axes": ",".join(res.axes), "highpass_hz": res.highpass_hz,
                              "pixel_ifov_rad": res.pixel_ifov_rad, "total_s": res.timings.get("total_s", 0.0)})
+
+
+def frames_restoration_from_dataset(ds, path=None) -> FrameRestoration:
+    """A :class:`FrameRestoration` read back from its ``restoration.nc`` (:func:`frames_restoration_dataset`).
+
+    Raises
+    ------
+    ProductError
+        Naming the file and the variable or attribute missing.
+    """
+    from simsat.product import ProductError
+
+    where = str(path) if path is not None else "restoration.nc"
+    for name in ("time", "pair_valid_matches", "pair_points", "pair_residual_px"):
+        if name not in ds.variables:
+            raise ProductError(f"{where}: no variable {name!r} (a truncated or foreign frames restoration); "
+                               f"run `simsat restore` again")
+    for name in ("axes", "pixel_ifov_rad"):
+        if name not in ds.attrs:
+            raise ProductError(f"{where}: no global attribute {name!r}; run `simsat restore` again")
+    axes = tuple(a for a in str(ds.attrs["axes"]).split(",") if a)
+    unknown = [a for a in axes if a not in AXES]
+    if unknown:
+        raise ProductError(f"{where}: attribute 'axes' names {', '.join(map(repr, unknown))} "
+                           f"(axes: {', '.join(AXES)})")
+
+    def values(name):
+        return np.asarray(ds[name].values, dtype=np.float64)
+
+    missing = [v for a in AXES for v in (a, f"knowledge_{a}", f"correction_{a}") if v not in ds.variables]
+    if missing:
+        raise ProductError(f"{where}: no variable {missing[0]!r}; run `simsat restore` again")
+    return FrameRestoration(
+        time=values("time"), restored={a: values(a) for a in AXES}, knowledge={a: values(f"knowledge_{a}") for a in AXES},
+        correction={a: values(f"correction_{a}") for a in AXES}, axes=axes,
+        n_valid=np.asarray(ds["pair_valid_matches"].values, dtype=np.int64),
+        n_points=np.asarray(ds["pair_points"].values, dtype=np.int64), residual_px=values("pair_residual_px"),
+        sigma={a: values(f"sigma_{a}") for a in AXES if f"sigma_{a}" in ds.variables},
+        highpass_hz=float(ds.attrs.get("highpass_hz", 0.0)), pixel_ifov_rad=float(ds.attrs["pixel_ifov_rad"]),
+        timings={"total_s": float(ds.attrs.get("total_s", float("nan")))},
+        path=Path(path) if path is not None else None)

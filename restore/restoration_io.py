@@ -331,13 +331,15 @@ def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult
         yaw_roll_coupling=float(ds.attrs.get("yaw_roll_coupling", 0.0)))
 
 
-def read_restoration(path: str | Path, *, product_time: np.ndarray | None = None) -> RestorationResult:
+def read_restoration(path: str | Path, *, product_time: np.ndarray | None = None):
     """Read ``restoration.nc`` into a :class:`RestorationResult` (checked against ``product_time`` if given).
 
     Per pair: matches, inliers, actual delay τ′, synthesis residual (the
     per-line synthesis itself is in the file's ``diff_*`` variables, not in
     ``PairData.synthesis``); per restored axis: the :class:`IntegrationRecord`
-    of its last integration.
+    of its last integration. A matrix detector's restoration (global
+    attribute ``acquisition = "frames"``) is read into a
+    :class:`restore.frames.FrameRestoration` instead.
 
     Raises
     ------
@@ -345,6 +347,14 @@ def read_restoration(path: str | Path, *, product_time: np.ndarray | None = None
         Unreadable file, or (with ``product_time``) one that does not belong to its product.
     """
     ds = open_restoration(path)
+    if str(ds.attrs.get("acquisition", "pushbroom")) == "frames":
+        from .frames import frames_restoration_from_dataset
+
+        res = frames_restoration_from_dataset(ds, path)
+        if product_time is not None and res.time.shape != np.shape(product_time):
+            raise ProductError(f"{path}: {res.time.size} frame times, the product has {np.size(product_time)}; "
+                               f"run `simsat restore` again")
+        return res
     if product_time is not None:
         check_restoration(ds, path, product_time=product_time)
     return result_from_dataset(ds, path)

@@ -160,6 +160,18 @@ def test_matrix_frames_render_restore_and_beat_the_knowledge(tmp_path):
         predicted = float(np.sqrt(np.mean(rest[f"sigma_{a}"].values ** 2))) / float(rest.attrs["pixel_ifov_rad"])
         assert 0 < predicted < 0.06
     assert "requirement" in frames_summary(tmp_path / "r")
+    # read back through the restoration reader: the same attitude, σ, matches and summary
+    from restore.frames import FrameRestoration
+    from restore.restoration_io import read_restoration
+
+    back = read_restoration(tmp_path / "r" / "restoration.nc", product_time=rest["time"].values)
+    assert isinstance(back, FrameRestoration) and back.axes == res.axes
+    for a in ("roll", "pitch", "yaw"):
+        np.testing.assert_array_equal(back.restored[a], res.restored[a])
+    for a in res.sigma:
+        np.testing.assert_array_equal(back.sigma[a], res.sigma[a])
+    np.testing.assert_array_equal(back.n_valid, res.n_valid)
+    assert back.summary().splitlines()[:4] == res.summary().splitlines()[:4]
     index = make_frames_report(tmp_path / "r")
     assert index.is_file() and (index.parent / "attitude_roll.png").is_file()
 
@@ -205,3 +217,28 @@ def test_a_pair_without_matches_splits_the_record_and_each_run_keeps_its_own_mea
         np.testing.assert_allclose(x[seg], want, atol=0.01 / 2.5e5)
         np.testing.assert_allclose(x[seg].mean(axis=0), 0.0, atol=1e-12)
     assert kept[cut] == 0 and np.all(np.isfinite(sigma))
+
+
+def test_a_truncated_frames_restoration_is_refused_with_its_name(tmp_path):
+    import xarray as xr
+
+    from restore.restoration_io import read_restoration
+    from simsat.product import ProductError
+
+    n = 5
+    data = {v: ("time", np.zeros(n)) for a in ("roll", "pitch", "yaw") for v in (a, f"knowledge_{a}", f"correction_{a}")}
+    data.update(pair_valid_matches=("pair", np.ones(n - 1, np.int32)), pair_points=("pair", np.ones(n - 1, np.int32)),
+                pair_residual_px=("pair", np.zeros(n - 1)))
+    attrs = {"acquisition": "frames", "axes": "roll,pitch", "pixel_ifov_rad": 4e-6, "highpass_hz": 0.0}
+    ds = xr.Dataset(data, coords={"time": ("time", np.arange(n) * 0.02)}, attrs=attrs)
+    ds.to_netcdf(tmp_path / "ok.nc")
+    back = read_restoration(tmp_path / "ok.nc")
+    assert back.axes == ("roll", "pitch") and back.time.size == n and back.sigma == {}
+    with pytest.raises(ProductError, match="frame times"):
+        read_restoration(tmp_path / "ok.nc", product_time=np.zeros(n + 1))
+    ds.drop_vars("pair_points").to_netcdf(tmp_path / "cut.nc")
+    with pytest.raises(ProductError, match=r"cut\.nc.*'pair_points'"):
+        read_restoration(tmp_path / "cut.nc")
+    ds.assign_attrs(axes="roll,tilt").to_netcdf(tmp_path / "axes.nc")
+    with pytest.raises(ProductError, match="'tilt'"):
+        read_restoration(tmp_path / "axes.nc")
