@@ -25,7 +25,8 @@ from scipy.stats import gamma
 
 from ._common import per_pair, prepare
 
-__all__ = ["SpectralEstimate", "estimate_differential_noise", "estimate_spectrum", "find_lines", "Lines"]
+__all__ = ["SpectralEstimate", "estimate_differential_noise", "estimate_spectrum", "find_lines", "Lines",
+           "notch_mask"]
 
 _BLIND_G2 = 0.05
 
@@ -242,11 +243,7 @@ def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=No
     S = np.where(detected, s_fine, 0.0)
     # Near blind frequencies (and 0 Hz) the ratio (P - nu) / |G|² is meaningless (leakage
     # and noise divided by ~0): bridge those bins linearly from well-observed neighbours.
-    info = (g2 * (nu.min() / nu)[:, None]).sum(0)
-    # compared with the best observed frequencies over half the shortest pair's
-    # notch spacing (1 / tau_min): the notches' whole depth, not just their bottom
-    Lw = max(1, int(round(max(2 * detection_hz + dilate_hz, 0.5 / taus.min()) / df))) | 1
-    poor = (info < min_gain * maximum_filter1d(info, Lw)) & (f >= 0.5 / taus.max())
+    poor = notch_mask(f, taus, nu, min_gain=min_gain, window_hz=2 * detection_hz + dilate_hz)
     if poor.any() and (~poor).any():
         # each notch gets the smaller of its two edge values: a line's skirt on one side
         # must not raise the prior where the data cannot tell signal from noise (that
@@ -261,6 +258,24 @@ def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=No
         S[-1] = 0.0
     return SpectralEstimate(freq=f, psd=S, noise_std=np.sqrt(nu / dt), detected=detected,
                             n_fft=n_fft, dt=dt)
+
+
+def notch_mask(f, taus, nu, *, min_gain: float = 0.1, window_hz: float = 5.0) -> np.ndarray:
+    """The frequencies :func:`estimate_spectrum` does not estimate: the notches around the blind frequencies.
+
+    Where the pairs' fused gain ``Σ_j |G_j|² ν_min / ν_j`` is below ``min_gain``
+    of its best over the neighbouring ``max(window_hz, 1 / (2 τ_min))`` (half
+    the shortest pair's notch spacing: the notches' whole depth, not just
+    their bottom), above ``1 / (2 τ_max)``. ``nu``: each pair's noise power.
+    """
+    f = np.asarray(f, dtype=np.float64)
+    taus = np.asarray(taus, dtype=np.float64)
+    nu = np.asarray(nu, dtype=np.float64)
+    df = f[1] - f[0]
+    g2 = 2 * (1 - np.cos(2 * np.pi * f[None, :] * taus[:, None]))
+    info = (g2 * (nu.min() / nu)[:, None]).sum(0)
+    Lw = max(1, int(round(max(window_hz, 0.5 / taus.min()) / df))) | 1
+    return (info < min_gain * maximum_filter1d(info, Lw)) & (f >= 0.5 / taus.max())
 
 
 @dataclass

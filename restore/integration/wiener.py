@@ -32,7 +32,7 @@ from scipy.fft import irfft, next_fast_len, rfft
 
 from ._common import check_positive, lagrange4_weights, prepare
 from .gaps import estimable_mask
-from .spectrum import SpectralEstimate, estimate_spectrum
+from .spectrum import SpectralEstimate, estimate_spectrum, notch_mask
 
 __all__ = ["integrate_inverse", "integrate_wiener_fft", "integrate_wiener", "WienerResult", "spectrum_for_lines",
            "lag_interpolation"]
@@ -553,19 +553,20 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     from scipy.stats import chi2
 
     offsets = (-1.0, -0.5, 0.0, 0.5, 1.0)
+    candidates = [fc + k / record_s for fc in centres for k in offsets]
+    candidates += notch_peaks(D, valid, taus_a, dt, noise_std, centres, exclude_hz=1.5 / record_s,
+                              false_alarm=false_alarm)
     # the objective's drop is −2 log of a likelihood ratio: χ² with the tone's 2(order + 1) coefficients
     # under no tone, over every candidate tried (Bonferroni)
-    threshold = float(chi2.isf(false_alarm / (len(offsets) * centres.size), 2 * (order + 1)))
+    threshold = float(chi2.isf(false_alarm / len(candidates), 2 * (order + 1)))
     chosen: list = []
     base = solve(None).objective if base_objective is None else float(base_objective)
     for _ in range(int(max_tones)):
         gains = []
-        for fc in centres:
-            for k in offsets:
-                fk = fc + k / record_s
-                if any(abs(fk - c) < 0.25 / record_s for c in chosen):
-                    continue
-                gains.append((base - solve((chosen + [fk], sd, order)).objective, fk))
+        for fk in candidates:
+            if any(abs(fk - c) < 0.25 / record_s for c in chosen):
+                continue
+            gains.append((base - solve((chosen + [fk], sd, order)).objective, fk))
         best = None
         # the χ² assumes the noise model; where the data carry misfit it does not (at several pixels of
         # jitter the matching errs with the signal), any tone near the notch gains more: the same tone a few
@@ -583,6 +584,58 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
         chosen.append(best[1])
         base -= best[0]
     return (chosen, sd, order) if chosen else None
+
+
+def notch_peaks(D, valid, taus, dt: float, noise_std, centres, *, exclude_hz: float,
+                false_alarm: float = 1e-8) -> list:
+    """In each notch around a common blind frequency (:func:`restore.integration.spectrum.notch_mask`): the
+    frequency where the differentials hold most power for a tone (their periodograms weighted by each pair's
+    ``|G_j|² / ν_j``, normalised so that white noise of the pairs' levels gives exponential values of mean 1),
+    outside ``exclude_hz`` of the blind frequency itself, when that power is a line the pairs see directly:
+    above ``ln(bins scanned / false_alarm)``, what noise exceeds with probability ``false_alarm`` over the
+    notch. A tone's sidebands through the lags do not count: far off the blind frequency they could fit
+    misfit (at 270 Hz, second-order sidebands fall on 1 px of misfit at 128-142 Hz), and the control tones
+    of :func:`blind_tones` would not tell.
+
+    The spectrum estimate does not estimate the notch (its prior there is
+    bridged from the edges, so that leakage and the lags' sidebands are not
+    divided by ~0). But a notch spans Hz around the blind frequency (± 4 Hz
+    at 135 Hz on the phr_cmg delays), and a line inside it that one pair sees
+    well (a CMG harmonic at 132 Hz, |G| = 0.41 for B1/B2) was left wholly in
+    the error: these peaks are the tone candidates :func:`blind_tones` tries
+    besides the blind frequency.
+    """
+    p, n = D.shape
+    m = next_fast_len(int(1.5 * n))
+    f = np.fft.rfftfreq(m, dt)
+    sig = np.broadcast_to(np.asarray(noise_std, dtype=np.float64), (p,))
+    nu = np.maximum(sig, 1e-300) ** 2 * dt
+    poor = notch_mask(f, taus, nu)
+    g2 = 2 * (1 - np.cos(2 * np.pi * f[None, :] * np.asarray(taus)[:, None]))
+    stat = np.zeros(f.size)
+    for j in range(p):
+        x = np.where(valid[j], D[j], 0.0)
+        x = np.where(valid[j], x - (x[valid[j]].mean() if valid[j].any() else 0.0), 0.0)
+        # |X|² of white noise of variance σ² over k valid lines has mean k σ² = k ν / dt
+        stat += np.abs(rfft(x, n=m)) ** 2 * dt / max(int(valid[j].sum()), 1) * g2[j] / nu[j] ** 2
+    stat /= np.maximum((g2 / nu[:, None]).sum(0), 1e-300)
+    out = []
+    for fc in np.atleast_1d(centres):
+        zone = poor & (np.abs(f - fc) > exclude_hz)
+        # the notch this blind frequency sits in: its contiguous poor bins
+        k0 = int(np.argmin(np.abs(f - fc)))
+        lo = k0
+        while lo > 0 and poor[lo - 1]:
+            lo -= 1
+        hi = k0
+        while hi < f.size - 1 and poor[hi + 1]:
+            hi += 1
+        idx = np.flatnonzero(zone[lo:hi + 1]) + lo
+        if idx.size:
+            k = idx[np.argmax(stat[idx])]
+            if stat[k] > math.log(idx.size / false_alarm):
+                out.append(float(f[k]))
+    return out
 
 
 #: :func:`blind_tones`: the control tones' offsets from a candidate [resolution bins] (beyond the candidates' ± 1

@@ -164,3 +164,42 @@ def test_misfit_the_noise_model_does_not_hold_finds_no_tone_but_a_real_tone_is_s
     assert found[0.0, True] is None                       # the calibrated one is not
     tones = found[1.2e-6, True]                           # a real tone under 0.3 px of misfit is still found
     assert tones is not None and abs(tones[0][0] - BLIND_HZ) < 1.0 / 1.6
+
+
+def test_a_line_inside_the_notch_that_one_pair_sees_is_found_and_restored(monkeypatch):
+    """A 0.35 px line at 132.2 Hz: 3 Hz off the common blind frequency, inside the notch the spectrum estimate
+    bridges (its prior there comes from the notch's edges), yet B1/B2 sees it with |G| = 0.41. The notch's
+    matched-filter peak is tried as a tone: found within a resolution bin, and the error falls far below the
+    line; without the tones the line is all of the error. Pure noise in the notch proposes no candidate."""
+    from restore.integration.wiener import notch_peaks, prepare
+    from restore.integration.spectrum import notch_mask
+
+    f_line = 132.2
+    f = np.fft.rfftfreq(6000, DT)
+    assert notch_mask(f, np.array(TAUS), np.ones(3))[np.argmin(np.abs(f - f_line))]      # inside the notch
+    assert 2 * abs(np.sin(np.pi * f_line * TAUS[2])) > 0.4                                # B1/B2 sees it
+    rng = np.random.default_rng(4)
+    n = 4000
+    t = np.arange(n) * DT
+
+    def theta(x):
+        return _cmg(x) + 1.4e-6 * np.sin(2 * np.pi * f_line * x + 0.3)
+
+    diffs, lags = [], []
+    for tau in TAUS:
+        lag = (_cmg(t + tau) - _cmg(t)) / IFOV * DT
+        diffs.append(theta(t + tau + lag) - theta(t) + 0.08 * IFOV * rng.standard_normal(n))
+        lags.append(lag)
+    res = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags)
+    assert res.spectrum.tones is not None and abs(res.spectrum.tones[0][0] - f_line) < 1.0 / (n * DT)
+    with_tone = _error_px(res.theta, theta(t))
+    blind = dataclasses.replace(methods.INTEGRATION_METHODS["wiener"], blind_tones=False)
+    monkeypatch.setitem(methods.INTEGRATION_METHODS, "wiener", blind)
+    without = _error_px(integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags).theta, theta(t))
+    assert without > 0.7 * 1.4e-6 / np.sqrt(2) / IFOV
+    assert with_tone < 0.2 * without
+    # noise alone: no peak in the notch is a line
+    noise = [0.08 * IFOV * rng.standard_normal(n) for _ in TAUS]
+    D, valid, taus, dt = prepare(noise, TAUS, DT)
+    centres = common_blind_frequencies(TAUS, DT, n * DT, 300.0)
+    assert notch_peaks(D, valid, taus, dt, np.full(3, 0.08 * IFOV), centres, exclude_hz=1.5 / (n * DT)) == []
