@@ -505,7 +505,9 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     which a spectrum estimate takes for attitude there. Near each common
     blind frequency below the prior's highest frequency (× 1.2) the MAP is
     solved with one tone of broad prior added, at the blind frequency and
-    ± half and one resolution bin; the tone that lowers the MAP objective most
+    ± half and one resolution bin, and at the line the pairs see directly
+    inside the notch the spectrum estimate leaves unestimated around it, if
+    any (:func:`notch_peaks`); the tone that lowers the MAP objective most
     is kept if the drop exceeds what pure noise gives with probability
     ``false_alarm`` over all the candidates (a generalised likelihood ratio,
     χ² with the tone's coefficients: where the field already explains the
