@@ -203,3 +203,32 @@ def test_a_line_inside_the_notch_that_one_pair_sees_is_found_and_restored(monkey
     D, valid, taus, dt = prepare(noise, TAUS, DT)
     centres = common_blind_frequencies(TAUS, DT, n * DT, 300.0)
     assert notch_peaks(D, valid, taus, dt, np.full(3, 0.08 * IFOV), centres, exclude_hz=1.5 / (n * DT)) == []
+
+
+def test_a_line_in_each_of_two_notches_gets_a_tone_each():
+    """Lines 1.9 Hz below 135.1 Hz and 3.8 Hz below 270.3 Hz (a CMG exciter and its harmonic): one tone per
+    notch, both kept (with one tone in all the other line stayed whole); never two in the same notch."""
+    from restore.integration.wiener import blind_tones
+
+    rng = np.random.default_rng(9)
+    n = 4000
+    t = np.arange(n) * DT
+    lines = (BLIND_HZ - 1.9, 2 * BLIND_HZ - 3.8)
+
+    def theta(x):
+        return _cmg(x) + 1.2e-6 * np.sin(2 * np.pi * lines[0] * x + 0.4) + 0.8e-6 * np.sin(2 * np.pi * lines[1] * x)
+
+    diffs, lags = [], []
+    for tau in TAUS:
+        lag = (_cmg(t + tau) - _cmg(t)) / IFOV * DT
+        diffs.append(theta(t + tau + lag) - theta(t) + 0.08 * IFOV * rng.standard_normal(n))
+        lags.append(lag)
+    res = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags)
+    found = sorted(res.spectrum.tones[0])
+    assert len(found) == 2
+    np.testing.assert_allclose(found, lines, atol=1.0 / (n * DT))
+    assert _error_px(res.theta, theta(t)) < 0.2 * 0.8e-6 / np.sqrt(2) / IFOV
+    prior = res.spectrum
+    one = blind_tones(diffs, TAUS, DT, psd=(prior.freq, prior.psd), noise_std=prior.noise_std, lags=lags,
+                      max_tones=1)
+    assert len(one[0]) == 1
