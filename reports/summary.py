@@ -27,7 +27,8 @@ def _attitude_errors(run) -> dict:
 
 
 def blind_tone_line(restoration, axes) -> str | None:
-    """The line saying which axes had a tone on the pairs' common blind frequency, found through the lags
+    """The line saying which axes had a tone on or near the pairs' common blind frequencies (through the lags,
+    or seen by one pair inside the notch)
     (``blind_tone_hz`` of ``prior_noise_std_<axis>`` in restoration.nc), or None."""
     found = []
     for a in axes:
@@ -37,7 +38,7 @@ def blind_tone_line(restoration, axes) -> str | None:
             found.append(f"{a} {hz} Hz")
     if not found:
         return None
-    return ("  a line on the pairs' common blind frequency, seen through the per-line lags, restored: "
+    return ("  a line on or near a frequency every pair is blind to, found as a tone, restored: "
             + "; ".join(found))
 
 
