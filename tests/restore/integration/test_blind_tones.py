@@ -34,6 +34,16 @@ def _record(tone_rad, n=4000, noise_px=0.08, seed=0):
     return t, theta(t), diffs, lags
 
 
+def _seen_through_lags(theta, t, rng, noise_px=0.08):
+    """Each pair's differentials of ``theta`` at the lags the CMG lines set, with white noise (as _record)."""
+    diffs, lags = [], []
+    for tau in TAUS:
+        lag = (_cmg(t + tau) - _cmg(t)) / IFOV * DT
+        diffs.append(theta(t + tau + lag) - theta(t) + noise_px * IFOV * rng.standard_normal(t.size))
+        lags.append(lag)
+    return diffs, lags
+
+
 def _error_px(est, truth):
     e = (est - truth)[400:-400]
     return float(np.sqrt(np.mean((e - e.mean()) ** 2))) / IFOV
@@ -80,11 +90,7 @@ def test_a_drifting_tone_is_followed_by_the_polynomial_modulation():
     def theta(x):
         return _cmg(x) + 1.2e-6 * np.cos(2 * np.pi * (BLIND_HZ - 0.3) * x + np.pi * 0.6 / 1.6 * x ** 2)
 
-    diffs, lags = [], []
-    for tau in TAUS:
-        lag = (_cmg(t + tau) - _cmg(t)) / IFOV * DT
-        diffs.append(theta(t + tau + lag) - theta(t) + 0.08 * IFOV * rng.standard_normal(n))
-        lags.append(lag)
+    diffs, lags = _seen_through_lags(theta, t, rng)
     prior = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags).spectrum
     assert isinstance(prior, PriorSpectrum)
     errs = {}
@@ -185,11 +191,7 @@ def test_a_line_inside_the_notch_that_one_pair_sees_is_found_and_restored(monkey
     def theta(x):
         return _cmg(x) + 1.4e-6 * np.sin(2 * np.pi * f_line * x + 0.3)
 
-    diffs, lags = [], []
-    for tau in TAUS:
-        lag = (_cmg(t + tau) - _cmg(t)) / IFOV * DT
-        diffs.append(theta(t + tau + lag) - theta(t) + 0.08 * IFOV * rng.standard_normal(n))
-        lags.append(lag)
+    diffs, lags = _seen_through_lags(theta, t, rng)
     res = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags)
     assert res.spectrum.tones is not None and abs(res.spectrum.tones[0][0] - f_line) < 1.0 / (n * DT)
     with_tone = _error_px(res.theta, theta(t))
@@ -218,11 +220,7 @@ def test_a_line_in_each_of_two_notches_gets_a_tone_each():
     def theta(x):
         return _cmg(x) + 1.2e-6 * np.sin(2 * np.pi * lines[0] * x + 0.4) + 0.8e-6 * np.sin(2 * np.pi * lines[1] * x)
 
-    diffs, lags = [], []
-    for tau in TAUS:
-        lag = (_cmg(t + tau) - _cmg(t)) / IFOV * DT
-        diffs.append(theta(t + tau + lag) - theta(t) + 0.08 * IFOV * rng.standard_normal(n))
-        lags.append(lag)
+    diffs, lags = _seen_through_lags(theta, t, rng)
     res = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags)
     found = sorted(res.spectrum.tones[0])
     assert len(found) == 2
