@@ -596,10 +596,10 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
 def notch_peaks(D, valid, taus, dt: float, noise_std, centres, *, exclude_hz: float,
                 false_alarm: float = 1e-8) -> list:
     """``[(centre index, frequency)]``: in each notch around a common blind frequency
-    (:func:`restore.integration.spectrum.notch_mask`): the
-    frequency where the differentials hold most power for a tone (their periodograms weighted by each pair's
-    ``|G_j|² / ν_j``, normalised so that white noise of the pairs' levels gives exponential values of mean 1),
-    outside ``exclude_hz`` of the blind frequency itself, when that power is a line the pairs see directly:
+    (:func:`restore.integration.spectrum.notch_mask`), the frequency where the differentials hold most power
+    for a tone (their periodograms weighted by each pair's ``|G_j|² / ν_j``, normalised so that white noise
+    of the pairs' levels gives exponential values of mean 1), outside ``exclude_hz`` of the blind frequency
+    itself, when that power is a line the pairs see directly:
     above ``ln(bins scanned / false_alarm)``, what noise exceeds with probability ``false_alarm`` over the
     notch. A tone's sidebands through the lags do not count: far off the blind frequency they could fit
     misfit (at 270 Hz, second-order sidebands fall on 1 px of misfit at 128-142 Hz), and the control tones
