@@ -342,7 +342,9 @@ def frames_restoration_from_dataset(ds, path=None) -> FrameRestoration:
     from simsat.product import ProductError
 
     where = str(path) if path is not None else "restoration.nc"
-    for name in ("time", "pair_valid_matches", "pair_points", "pair_residual_px"):
+    required = ["time", "pair_valid_matches", "pair_points", "pair_residual_px"] + \
+        [v for a in AXES for v in (a, f"knowledge_{a}", f"correction_{a}")]
+    for name in required:
         if name not in ds.variables:
             raise ProductError(f"{where}: no variable {name!r} (a truncated or foreign frames restoration); "
                                f"run `simsat restore` again")
@@ -358,9 +360,6 @@ def frames_restoration_from_dataset(ds, path=None) -> FrameRestoration:
     def values(name):
         return np.asarray(ds[name].values, dtype=np.float64)
 
-    missing = [v for a in AXES for v in (a, f"knowledge_{a}", f"correction_{a}") if v not in ds.variables]
-    if missing:
-        raise ProductError(f"{where}: no variable {missing[0]!r}; run `simsat restore` again")
     return FrameRestoration(
         time=values("time"), restored={a: values(a) for a in AXES}, knowledge={a: values(f"knowledge_{a}") for a in AXES},
         correction={a: values(f"correction_{a}") for a in AXES}, axes=axes,

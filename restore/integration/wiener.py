@@ -622,8 +622,7 @@ def notch_peaks(D, valid, taus, dt: float, noise_std, centres, *, exclude_hz: fl
     g2 = 2 * (1 - np.cos(2 * np.pi * f[None, :] * np.asarray(taus)[:, None]))
     stat = np.zeros(f.size)
     for j in range(p):
-        x = np.where(valid[j], D[j], 0.0)
-        x = np.where(valid[j], x - (x[valid[j]].mean() if valid[j].any() else 0.0), 0.0)
+        x = np.where(valid[j], D[j] - (D[j][valid[j]].mean() if valid[j].any() else 0.0), 0.0)
         # |X|² of white noise of variance σ² over k valid lines has mean k σ² = k ν / dt
         stat += np.abs(rfft(x, n=m)) ** 2 * dt / max(int(valid[j].sum()), 1) * g2[j] / nu[j] ** 2
     stat /= np.maximum((g2 / nu[:, None]).sum(0), 1e-300)
