@@ -35,7 +35,7 @@ from .gaps import estimable_mask
 from .spectrum import SpectralEstimate, estimate_spectrum, notch_mask
 
 __all__ = ["integrate_inverse", "integrate_wiener_fft", "integrate_wiener", "WienerResult", "spectrum_for_lines",
-           "lag_interpolation"]
+           "lag_interpolation", "tone_order"]
 
 
 def _grid(n: int, taus: np.ndarray, dt: float, pad_fraction: float, max_lag_s: float = 0.0) -> int:
@@ -495,7 +495,7 @@ def common_blind_frequencies(taus, dt: float, record_s: float, top_hz: float) ->
 
 def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: float = 1e-6,
                 maxiter: int = 300, false_alarm: float = 1e-8, max_tones: int | None = None, order: int = 2,
-                base_objective: float | None = None):
+                max_order: int = 4, base_objective: float | None = None):
     """A tone on a frequency every pair is blind to, seen through the per-line lags: ``(frequencies, sd, order)``
     or None.
 
@@ -521,8 +521,11 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     The tone's cos and sin each carry a polynomial of degree ``order`` in
     time (a line whose amplitude and phase drift over the record, as a CMG
     harmonic's do: on that scenario the roll error 0.050 → 0.029 px with
-    ``order = 2``, none with 1). ``base_objective``: the objective of the
-    same MAP without a tone, when the caller has solved it already.
+    ``order = 2``, none with 1); once the tones are chosen the degree rises
+    by 2 at a time up to ``max_order`` while the data call for it
+    (:func:`tone_order`; ``max_order = order``: never). ``base_objective``:
+    the objective of the same MAP without a tone, when the caller has solved
+    it already.
 
     The χ² holds under the noise model. Where the data carry misfit it does
     not model (at 3 px of jitter and more the matching errs with the signal,
@@ -590,7 +593,41 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
         chosen.append(best[1])
         used.add(best[2])
         base -= best[0]
-    return (chosen, sd, order) if chosen else None
+    if not chosen:
+        return None
+    return chosen, sd, tone_order(solve, chosen, sd, order, base, max_order=max_order)
+
+
+def tone_order(solve, chosen: list, sd: float, order: int, objective: float, *, max_order: int,
+               false_alarm: float | None = None) -> int:
+    """The degree of the tones' polynomial modulation the data call for: from ``order`` up by 2 while the
+    MAP objective (−2 log posterior) drops by more than 2 per added coefficient (4 per tone: Akaike's
+    criterion, the degree expected to predict best), or, given ``false_alarm``, by more than the χ² of the
+    added coefficients reaches with that probability (nested models: the higher degree contains the lower);
+    ``objective`` is that of ``order``.
+
+    ``solve(tones)`` is the MAP with ``tones = (frequencies, sd, order)``. A
+    CMG harmonic drifts by 0.3-1 % over a record, a turn of phase or more at
+    130 Hz, which a quadratic in time follows only at first. The tones are
+    already found (the search's strict false alarm guards against inventing
+    one); here a higher degree only shapes a tone that is there, within a few
+    bins of it, and what counts is the error, not a test: a 0.3 px line
+    drifting 1.2 Hz over the record lowers the objective by 40 at degree 4
+    (its error 0.016 → 0.007 px). :func:`blind_tones` stops at 4: a
+    polynomial of degree 6 swings at the record's ends (an unseen CMG's roll
+    0.029 px at degree 4, 0.044 at 6, which Akaike's criterion chose).
+    """
+    from scipy.stats import chi2
+
+    best, base = int(order), float(objective)
+    for o in range(int(order) + 2, int(max_order) + 1, 2):
+        obj = solve((chosen, sd, o)).objective
+        added = 2 * (o - best) * len(chosen)
+        need = ORDER_PER_COEFFICIENT * added if false_alarm is None else chi2.isf(float(false_alarm), added)
+        if base - obj < need:
+            break
+        best, base = o, obj
+    return best
 
 
 def notch_peaks(D, valid, taus, dt: float, noise_std, centres, *, exclude_hz: float,
@@ -650,6 +687,9 @@ def notch_peaks(D, valid, taus, dt: float, noise_std, centres, *, exclude_hz: fl
 CONTROL_OFFSETS_BINS = (-6.0, -4.0, 4.0, 6.0)
 #: :func:`blind_tones`: the best candidates (by their drop) checked against their controls, in turn
 CANDIDATES_CHECKED = 3
+#: :func:`tone_order`: a step up in a found tone's modulation degree must lower the MAP objective by this much per
+#: added coefficient (2: Akaike's criterion)
+ORDER_PER_COEFFICIENT = 2.0
 
 
 def spectrum_for_lines(diffs, taus, dt, *, noise_std=None, spectrum_options: dict | None = None,

@@ -100,7 +100,7 @@ def test_a_drifting_tone_is_followed_by_the_polynomial_modulation():
     errs = {}
     for order in (0, 2):
         tones = blind_tones(diffs, TAUS, DT, psd=(prior.freq, prior.psd), noise_std=prior.noise_std, lags=lags,
-                            order=order)
+                            order=order, max_order=order)
         assert tones is not None and tones[2] == order
         est = integrate_wiener(diffs, TAUS, DT, psd=(prior.freq, prior.psd), noise_std=prior.noise_std, lags=lags,
                                tones=tones)
@@ -234,3 +234,37 @@ def test_a_line_in_each_of_two_notches_gets_a_tone_each():
     one = blind_tones(diffs, TAUS, DT, psd=(prior.freq, prior.psd), noise_std=prior.noise_std, lags=lags,
                       max_tones=1)
     assert len(one[0]) == 1
+
+
+def test_the_modulation_degree_rises_where_the_line_drifts_and_not_where_it_is_steady():
+    """A line drifting by 1.2 Hz over the record across the blind frequency (a quarter turn of phase at the
+    ends beyond a quadratic's reach) gets a degree above 2 and a smaller error than with degree 2; a steady
+    one keeps degree 2 (nested χ²: the higher degree must earn its coefficients)."""
+    from restore.integration.wiener import blind_tones, integrate_wiener
+
+    rng = np.random.default_rng(11)
+    n = 4000
+    t = np.arange(n) * DT
+    span = n * DT
+
+    def drifting(x):
+        return _cmg(x) + 1.2e-6 * np.cos(2 * np.pi * (BLIND_HZ - 0.6) * x + np.pi * 1.2 / span * x ** 2)
+
+    def steady(x):
+        return _cmg(x) + 1.2e-6 * np.cos(2 * np.pi * BLIND_HZ * x + 0.3)
+
+    orders = {}
+    for name, theta in (("drifting", drifting), ("steady", steady)):
+        diffs, lags = _seen_through_lags(theta, t, rng)
+        prior = integrate_axis(diffs, TAUS, DT, method="wiener", lags=lags, prior_passes=0).spectrum
+        kw = dict(psd=(prior.freq, prior.psd), noise_std=prior.noise_std, lags=lags)
+        tones = blind_tones(diffs, TAUS, DT, **kw)
+        assert tones is not None
+        orders[name] = tones[2]
+        if name == "drifting":
+            fixed = blind_tones(diffs, TAUS, DT, **kw, max_order=2)
+            err = {k: _error_px(integrate_wiener(diffs, TAUS, DT, **kw, tones=v), theta(t))
+                   for k, v in (("chosen", tones), ("degree 2", fixed))}
+    assert orders["steady"] == 2
+    assert orders["drifting"] > 2
+    assert err["chosen"] < 0.8 * err["degree 2"]
