@@ -314,6 +314,10 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
         times the prior is estimated again on differentials corrected with
         the lag-aware estimate, and the method run again with it
         (:func:`_prior_again`). 0: the prior of the least-squares correction.
+        None with a single pair: the MAP's estimate then follows that pair's
+        own noise where the prior is high, and a correction with it takes
+        noise out of the differentials as the least-squares one does
+        (strip_two_lines 0.0266 / 0.0273 → 0.0278 / 0.0310 px with one pass).
 
     Returns
     -------
@@ -344,7 +348,7 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
             res = integrate(measured, taus, dt, method=spec.name, **fixed, **data, lags=lags, **details)
             if spec.blind_tones and "tones" not in opts:
                 res, prior = _with_blind_tone(res, prior, spec, diffs, measured, taus, dt, opts, data, lags, details)
-            for _ in range(int(prior_passes)):
+            for _ in range(int(prior_passes) if len(taus) > 1 else 0):
                 res, prior = _prior_again(res, prior, spec, measured, taus, dt, opts, data, lags, details)
     elif exact_lags:
         res = integrate(measured, taus, dt, method=spec.name, **opts, **data, lags=lags, **details)
