@@ -235,12 +235,19 @@ def draw_transfer(ax, *, probe: dict | None, measured: dict | None, taus, pair_n
 
 # ----------------------------------------------------------------------------- budget
 def draw_budget(ax, rows: list, *, unit: str = "px"):
-    """Horizontal bars of RMS and 99.7 % per component, grouped by axis."""
-    comps = [c for c in ("uncorrected knowledge", "matching noise", "model / synthesis", "integration",
-                         "star-tracker anchoring", "total (restored − true)") if any(r["component"] == c for r in rows)]
+    """Horizontal bars of RMS and 99.7 % per component, grouped by axis.
+
+    The predicted parts (what no pair sees, the best linear restoration's floor) have an RMS only: one
+    solid bar, beside the measured components.
+    """
+    comps = [c for c in ("uncorrected knowledge", "unobservable (no pair sees it)", "floor (best linear restoration)",
+                         "matching noise", "model / synthesis", "integration", "star-tracker anchoring",
+                         "total (restored − true)") if any(r["component"] == c for r in rows)]
     axes = [a for a in AXES if any(r["axis"] == a for r in rows)]
-    colors = {"uncorrected knowledge": C_KNOW, "matching noise": "#56B4E9", "model / synthesis": "#CC79A7",
-              "integration": "#009E73", "star-tracker anchoring": "#999999", "total (restored − true)": C_ERR}
+    colors = {"uncorrected knowledge": C_KNOW, "unobservable (no pair sees it)": "#444444",
+              "floor (best linear restoration)": "#0072B2", "matching noise": "#56B4E9",
+              "model / synthesis": "#CC79A7", "integration": "#009E73", "star-tracker anchoring": "#999999",
+              "total (restored − true)": C_ERR}
     h = 0.8 / max(1, len(comps))
     yt, yl = [], []
     for i, a in enumerate(axes):
@@ -249,8 +256,10 @@ def draw_budget(ax, rows: list, *, unit: str = "px"):
             if r is None:
                 continue
             y = i + k * h
-            ax.barh(y, r[f"p997_{unit}"], height=h * 0.9, color=colors[c], alpha=0.35,
-                    label=f"{c} (99.7 %)" if i == 0 else None)
+            p997 = r.get(f"p997_{unit}")
+            if p997 is not None and np.isfinite(p997):
+                ax.barh(y, p997, height=h * 0.9, color=colors[c], alpha=0.35,
+                        label=f"{c} (99.7 %)" if i == 0 else None)
             ax.barh(y, r[f"rms_{unit}"], height=h * 0.9, color=colors[c], label=f"{c} (RMS)" if i == 0 else None)
         yt.append(i + 0.4 - h / 2)
         yl.append(a)

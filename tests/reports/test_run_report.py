@@ -733,3 +733,21 @@ def test_an_anchored_run_judges_the_integration_without_the_trend_the_star_track
         assert np.allclose(np.diff(anc[ok], 2), 0.0, atol=1e-15) if ok.sum() > 2 else True   # a straight line
         total = rows["total (restored − true)"]["rms_urad"]
         assert total == pytest.approx(_stats(meta["restoration"][a].values - true_att(a, t))[0] * 1e6, rel=1e-9)
+
+
+def test_the_budget_figure_draws_the_predicted_parts_beside_the_measured_ones():
+    """What no pair sees and the floor (an RMS each, no 99.7 %) get one solid bar each, drawn at their value;
+    a measured component gets its RMS and its 99.7 % bar."""
+    from matplotlib.figure import Figure
+
+    from reports.report_plots import draw_budget
+
+    rows = [{"axis": "roll", "component": "uncorrected knowledge", "rms_px": 0.7, "p997_px": 1.8},
+            {"axis": "roll", "component": "unobservable (no pair sees it)", "rms_px": 0.002, "p997_px": None},
+            {"axis": "roll", "component": "floor (best linear restoration)", "rms_px": 0.01, "p997_px": None},
+            {"axis": "roll", "component": "total (restored − true)", "rms_px": 0.03, "p997_px": 0.1}]
+    ax = Figure().subplots()
+    draw_budget(ax, rows)
+    widths = sorted(round(p.get_width(), 6) for p in ax.patches)
+    assert widths == [0.002, 0.01, 0.03, 0.1, 0.7, 1.8]
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == [r["component"] for r in rows]
