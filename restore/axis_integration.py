@@ -314,7 +314,7 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
         times the prior is estimated again on differentials corrected with
         the lag-aware estimate, and the method run again with it
         (:func:`_prior_again`). 0: the prior of the least-squares correction.
-        None with a single pair: the MAP's estimate then follows that pair's
+        Never with a single pair: the MAP's estimate then follows that pair's
         own noise where the prior is high, and a correction with it takes
         noise out of the differentials as the least-squares one does
         (strip_two_lines 0.0266 / 0.0273 → 0.0278 / 0.0310 px with one pass).

@@ -598,12 +598,10 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     return chosen, sd, tone_order(solve, chosen, sd, order, base, max_order=max_order)
 
 
-def tone_order(solve, chosen: list, sd: float, order: int, objective: float, *, max_order: int,
-               false_alarm: float | None = None) -> int:
+def tone_order(solve, chosen: list, sd: float, order: int, objective: float, *, max_order: int) -> int:
     """The degree of the tones' polynomial modulation the data call for: from ``order`` up by 2 while the
     MAP objective (−2 log posterior) drops by more than 2 per added coefficient (4 per tone: Akaike's
-    criterion, the degree expected to predict best), or, given ``false_alarm``, by more than the χ² of the
-    added coefficients reaches with that probability (nested models: the higher degree contains the lower);
+    criterion, the degree expected to predict best; nested models, the higher degree contains the lower);
     ``objective`` is that of ``order``.
 
     ``solve(tones)`` is the MAP with ``tones = (frequencies, sd, order)``. A
@@ -617,14 +615,10 @@ def tone_order(solve, chosen: list, sd: float, order: int, objective: float, *, 
     polynomial of degree 6 swings at the record's ends (an unseen CMG's roll
     0.029 px at degree 4, 0.044 at 6, which Akaike's criterion chose).
     """
-    from scipy.stats import chi2
-
     best, base = int(order), float(objective)
     for o in range(int(order) + 2, int(max_order) + 1, 2):
         obj = solve((chosen, sd, o)).objective
-        added = 2 * (o - best) * len(chosen)
-        need = ORDER_PER_COEFFICIENT * added if false_alarm is None else chi2.isf(float(false_alarm), added)
-        if base - obj < need:
+        if base - obj < ORDER_PER_COEFFICIENT * 2 * (o - best) * len(chosen):
             break
         best, base = o, obj
     return best
