@@ -163,6 +163,9 @@ MEANING = {
                            "moved the estimate by more than 0.01 px RMS",
     "restoration.rematch_search_lines": "search half-range of the rematch, lines [px]",
     "restoration.rematch_search_columns": "search half-range of the rematch, columns [px]",
+    "restoration.noise_colour_weighting": "after the predicted σ, integrate each axis again (its prior frozen) "
+    "weighing the pairs' residuals by the noise colour the σ's check of the fit residual measured (≥ 1: only "
+    "where the matching noise exceeds the white model, mostly below a few Hz), then predict σ again",
     "restoration.posterior_samples": "Monte Carlo draws through the integration for the predicted 1-σ per line "
                                      "(restoration.nc sigma_<axis>); 0: none",
     "restoration.max_sigma_px": "lines whose predicted σ exceeds this [px] are flagged and not restored; \"auto\": "

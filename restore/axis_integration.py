@@ -50,6 +50,8 @@ class PriorSpectrum:
     noise_std: np.ndarray
     #: a tone on a frequency every pair is blind to, found through the lags: ([Hz], prior sd [rad][, order]) or None
     tones: tuple | None = None
+    #: each pair's noise power relative to white, (freq [Hz], colour (pair, freq)), the MAP weighs with; or None
+    noise_colour: tuple | None = None
 
 
 @dataclass

@@ -110,6 +110,9 @@ class PosteriorSigma:
     #: per band two pairs share: the share of its pairs' noise power that is the band's own matching error
     #: (mean over the pairs that see it and over frequency; :func:`shared_band_noise`); empty when none
     band_shares: dict = field(default_factory=dict)
+    #: the ratio of real to simulated fit-residual power the draws use (:func:`noise_colour_estimate`), per pair
+    #: and frequency of ``rfftfreq(lines, Δt)``; None without the check
+    colour_estimate: np.ndarray | None = None
 
 
 def detrended(errors: np.ndarray) -> np.ndarray:
@@ -578,7 +581,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     edges = _band_edges(n)
     errs, sim = run(None, samples, check_noise)
     scale = 1.0
-    colour = shared = None
+    colour = shared = estimate = None
     if check_noise:
         resid = fit_residuals(d, np.asarray(record.increment, dtype=np.float64), taus, record.lags_s, dt,
                               highpass_hz=record.highpass_hz)
@@ -594,7 +597,8 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     return PosteriorSigma(sigma=np.sqrt(_line_variance(errs, smooth_lines)), noise_scale=float(scale),
                           samples=int(samples), noise_colour=colour, detrended_rms=detrended_rms(errs),
                           detrended_sigma=np.sqrt(_line_variance(detrended(errs), smooth_lines)),
-                          band_shares=shared.band_shares() if shared is not None else {})
+                          band_shares=shared.band_shares() if shared is not None else {},
+                          colour_estimate=estimate)
 
 
 def _line_variance(errs: np.ndarray, smooth_lines: int) -> np.ndarray:

@@ -185,6 +185,13 @@ def _integration_variables(res: RestorationResult) -> tuple[dict, dict]:
                 if len(rec.spectrum.tones) > 2:
                     attrs["blind_tone_order"] = int(rec.spectrum.tones[2])
             data[f"prior_noise_std_{a}"] = ("pair", nstd, attrs)
+            if rec.spectrum.noise_colour is not None:  # the noise colour the MAP weighed the residual with
+                fc, col = rec.spectrum.noise_colour
+                full_col = np.full((len(names), len(fc)), np.nan)
+                full_col[idx] = col
+                coords[f"colour_freq_{a}"] = (f"colour_freq_{a}", np.asarray(fc, dtype=np.float64), {"units": "Hz"})
+                data[f"prior_noise_colour_{a}"] = (("pair", f"colour_freq_{a}"), full_col, {
+                    "long_name": "each pair's noise power relative to white, as the MAP weighed its residual"})
     return data, coords
 
 
@@ -283,6 +290,9 @@ def _records_from(ds, info: dict) -> dict:
                               float(at["blind_tone_prior_sd_rad"]))
                 if "blind_tone_order" in at:
                     spec.tones += (int(at["blind_tone_order"]),)
+            if f"prior_noise_colour_{a}" in ds.variables:
+                spec.noise_colour = (np.asarray(ds[f"colour_freq_{a}"].values, dtype=np.float64),
+                                     _values(ds, f"prior_noise_colour_{a}")[idx])
         out[a] = IntegrationRecord(
             axis=a, pairs=list(meta["pairs"]), diffs=_values(ds, f"integrated_diff_{a}")[idx],
             sigmas=_values(ds, f"integrated_sigma_{a}")[idx], taus=_values(ds, f"integrated_tau_{a}")[idx],

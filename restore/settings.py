@@ -47,6 +47,7 @@ class RestorationSettings:
     tdi_mean_attitude: bool = True
     min_coverage: float = 0.05
     posterior_samples: int = 8
+    noise_colour_weighting: bool = True
     knowledge_prior: bool = True
     rematch: int | str = "auto"
     rematch_search: tuple = (2, 2)
@@ -142,6 +143,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.tdi_mean_attitude = sec.boolean("tdi_mean_attitude", s.tdi_mean_attitude)
     s.min_coverage = sec.number("min_coverage", s.min_coverage, ge=0, le=1)
     s.knowledge_prior = sec.boolean("knowledge_prior", s.knowledge_prior)
+    s.noise_colour_weighting = sec.boolean("noise_colour_weighting", s.noise_colour_weighting)
     rm = sec.raw("rematch", "auto")
     if rm != "auto" and (isinstance(rm, bool) or not isinstance(rm, int) or not 0 <= rm <= 5):
         raise sec.error("rematch", f"must be \"auto\" or a number of passes from 0 to 5, got {rm!r}")

@@ -41,7 +41,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "colour_weighted", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -711,6 +711,30 @@ def yaw_pitch_coupling(pairs: list) -> float:
 
 
 # --------------------------------------------------------------------------- uncertainty
+def colour_weighted(record: IntegrationRecord, colour) -> IntegrationRecord | None:
+    """The axis's integration again, its prior frozen, weighing each pair's residual by the inverse of the
+    noise colour the predicted σ's check measured; None where the method cannot or there is no colour.
+
+    The prior and the white noise levels are estimated on the assumption of
+    white matching noise, but the fit residual shows more at low frequencies
+    (a band's own error common to a line's points; :mod:`restore.posterior`):
+    there the MAP trusted the differentials too much. ``colour`` (pair,
+    ``rfftfreq(lines, Δt)``) is :attr:`restore.posterior.PosteriorSigma.colour_estimate`,
+    taken ≥ 1: it lowers the weight where the noise exceeds the white model,
+    never raises it (the white level is measured where the pairs are blind,
+    below it the ratio is the estimate's own scatter).
+    """
+    if colour is None or record.spectrum is None or not integration_method(record.method).noise_colour:
+        return None
+    n = np.asarray(record.diffs).shape[1]
+    col = np.maximum(np.asarray(colour, dtype=np.float64), 1.0)
+    if col.shape != (len(record.taus), n // 2 + 1) or not np.all(np.isfinite(col)):
+        return None
+    spectrum = replace(record.spectrum, noise_colour=(np.fft.rfftfreq(n, record.line_period_s), col))
+    weighted = replace(record, spectrum=spectrum)
+    return replace(weighted, increment=weighted.rerun())
+
+
 def predicted_sigma(records: dict, product: Product, settings: RestorationSettings) -> dict:
     """Predicted 1-σ per line of each restored axis [rad] (:func:`restore.posterior.posterior_sigma`).
 

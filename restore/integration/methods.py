@@ -16,6 +16,9 @@ Callers never branch on a method's name: they ask its spec what it can do.
 * ``blind_tones`` — with lags modelled, also estimates a tone on a frequency
   every pair is blind to, which only the lags show
   (:func:`restore.integration.wiener.blind_tones`; ``tones=`` when frozen);
+* ``noise_colour`` — weighs the residual by the inverse of a coloured noise
+  covariance (``noise_colour=`` (freq, colour per pair): the noise's power
+  relative to white, as the predicted σ's check measures it);
 * ``line_sigmas`` — takes ``sigmas=`` (per-line formal σ of the differentials);
 * ``reports_spectrum`` — adapts its prior to the data and, with
   ``return_details=True``, reports the PSD prior and noise levels it used
@@ -61,6 +64,7 @@ class IntegrationMethod:
     line_lags: bool = False
     prior_lags: bool = False
     blind_tones: bool = False
+    noise_colour: bool = False
     line_sigmas: bool = False
     reports_spectrum: bool = False
     psd_ceiling: bool = False
@@ -100,6 +104,8 @@ class IntegrationMethod:
         out = {**options, "psd": (spectrum.freq, spectrum.psd), "noise_std": spectrum.noise_std}
         if getattr(spectrum, "tones", None) is not None:
             out["tones"] = spectrum.tones
+        if getattr(spectrum, "noise_colour", None) is not None:
+            out["noise_colour"] = spectrum.noise_colour
         return out
 
 
@@ -111,7 +117,8 @@ def _spec(name, module, function_name, principle, **caps) -> IntegrationMethod:
 INTEGRATION_METHODS: dict[str, IntegrationMethod] = {s.name: s for s in (
     _spec("wiener", "wiener", "integrate_wiener",
           "exact multi-pair Wiener / MAP on the finite record, data-estimated PSD prior, CG",
-          line_weights=True, reports_spectrum=True, psd_ceiling=True, prior_lags=True, blind_tones=True),
+          line_weights=True, reports_spectrum=True, psd_ceiling=True, prior_lags=True, blind_tones=True,
+          noise_colour=True),
     _spec("wiener_fft", "wiener", "integrate_wiener_fft", "one-shot multi-pair Wiener filter (FFT)"),
     _spec("inverse", "wiener", "integrate_inverse", "pseudo-inverse conj(G) / (|G|² + k)", gain_option="k"),
     _spec("local", "local", "integrate_local", "CNES local integration w = R⁻¹ r"),

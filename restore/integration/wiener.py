@@ -129,6 +129,18 @@ def _ceiling_on_grid(ceiling, f: np.ndarray) -> np.ndarray:
     return out
 
 
+def _colour_on_grid(noise_colour, f: np.ndarray, p: int) -> np.ndarray:
+    """``noise_colour`` = (freq, colour (pair, freq)) interpolated at ``f`` (constant beyond its ends)."""
+    fc, col = noise_colour
+    fc = np.asarray(fc, dtype=np.float64)
+    col = np.atleast_2d(np.asarray(col, dtype=np.float64))
+    if col.shape != (p, fc.size):
+        raise ValueError(f"noise_colour: expected ({p}, {fc.size}) values for {p} pairs, got {col.shape}")
+    if not np.all(np.isfinite(col)) or np.any(col <= 0):
+        raise ValueError("noise_colour: every value must be finite and > 0")
+    return np.array([np.interp(f, fc, c) for c in col])
+
+
 def integrate_inverse(diffs, taus, dt, *, k: float = 0.1, pad_fraction: float = 0.5,
                       max_gap_s: float | None = None) -> np.ndarray:
     """Pseudo-inverse integration with a constant ``k`` (patent's ``H_k``), fused over pairs.
@@ -232,8 +244,19 @@ class WienerResult:
         self.residual = residual
 
 
+def _colour_weighting(w: np.ndarray, colour: np.ndarray | None, m: int):
+    """The noise's inverse covariance as an operator on (pair, sample) residuals: ``w`` per sample, or with a
+    ``colour`` (pair, ``m // 2 + 1``) ``√w C⁻¹ √w``, ``C`` the circulant of spectrum ``colour`` on the grid
+    of ``m`` (symmetric positive definite: a zero-phase filter of positive gain between two diagonals)."""
+    if colour is None:
+        return lambda r: r * w
+    sw, n = np.sqrt(w), w.shape[1]
+    inv = 1.0 / colour
+    return lambda r: sw * irfft(rfft(sw * r, n=m, axis=-1) * inv, n=m, axis=-1)[:, :n]
+
+
 def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=None, rel_weights=None,
-              lag_ops=None, extra=None):
+              lag_ops=None, extra=None, colour=None):
     """Solve the MAP normal equations on the periodic grid of length ``m``.
 
     ``theta0`` (length ``m``, optional) warm-starts the iteration;
@@ -245,7 +268,10 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
     (pair, sample, q), ``sd`` (q,)), optional, adds q parameters ``a`` of
     prior ``N(0, sd²)`` whose differentials are ``X a`` (a tone on a
     frequency every pair is blind to, seen through the lags only:
-    :func:`blind_tones`); their estimate is returned last.
+    :func:`blind_tones`); their estimate is returned last. ``colour``
+    (pair, ``m // 2 + 1``), optional: each pair's noise power relative to
+    white at the grid's frequencies (the noise covariance becomes
+    ``W^-1/2 C W^-1/2``, see :func:`_colour_weighting`).
     Returns (theta on the record, theta on the grid, predicted differentials,
     iterations, residual[, extra parameters]).
     """
@@ -289,12 +315,15 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
         def adjoint(r: np.ndarray) -> np.ndarray:  # noqa: F811
             return np.concatenate([field_adj(r), np.einsum("pnq,pn->q", xs, r)])
 
-    def normal(z: np.ndarray) -> np.ndarray:
-        return z + adjoint(forward(z) * w)
+    weigh = _colour_weighting(w, colour, m)
 
-    b = adjoint(dz * w)
+    def normal(z: np.ndarray) -> np.ndarray:
+        return z + adjoint(weigh(forward(z)))
+
+    b = adjoint(weigh(dz))
     frac = valid.sum(1) / m
-    diag = 1.0 + (np.abs(kop) ** 2 * (frac / sigma**2)[:, None]).sum(0)
+    gain = (frac / sigma**2)[:, None] / (1.0 if colour is None else colour)
+    diag = 1.0 + (np.abs(kop) ** 2 * gain).sum(0)
     diag_x = 1.0 + np.einsum("pnq,pn->q", xs * xs, w) if q else None
 
     def precond(r: np.ndarray) -> np.ndarray:
@@ -334,7 +363,8 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
 def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction: float = 0.5,
                      tol: float = 1e-7, maxiter: int = 300, refine: int | None = None,
                      max_gap_s: float | None = None, spectrum_options: dict | None = None,
-                     weights=None, psd_ceiling=None, lags=None, tones=None, return_details: bool = False):
+                     weights=None, psd_ceiling=None, lags=None, tones=None, noise_colour=None,
+                     return_details: bool = False):
     """Exact multi-pair Wiener (MAP) integration on the finite record, by conjugate gradients.
 
     With gaps, the first PSD estimate comes from the gap-free segments only
@@ -389,6 +419,13 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         rerun on simulated ones).
         The estimate returned includes them; ``WienerResult.tones`` holds
         their (cos, sin) coefficients.
+    noise_colour : (freq, colour), keyword-only
+        Each pair's noise power relative to its white level, ``colour`` (pair,
+        freq) > 0 at ``freq`` [Hz] (e.g. what the predicted σ's check of the
+        fit residual measured, :func:`restore.posterior.noise_colour_estimate`):
+        the normal equations weigh the residual by the inverse of that
+        coloured covariance (:func:`_colour_weighting`) instead of per sample
+        only. The reported objective stays the white one.
     return_details : bool, keyword-only
         Return a :class:`WienerResult` instead of the array.
 
@@ -434,6 +471,7 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
     opts = dict(spectrum_options or {})
     spec: SpectralEstimate = estimate_spectrum(D, taus, dt, n_fft=m, noise_std=noise_std, **opts)
     passes = 0 if psd is not None else int(refine)
+    colour = None if noise_colour is None else _colour_on_grid(noise_colour, spec.freq, p)
     grid = None
     ceiling = None if psd is not None or psd_ceiling is None else _ceiling_on_grid(psd_ceiling, spec.freq)
     for k in range(passes + 1):
@@ -445,7 +483,7 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
             S[-1] = 0.0  # keep the operator exactly self-adjoint on real signals
         out = _cg_solve(D, valid, taus, dt, spec.freq, S, spec.noise_std, m, tol=tol, maxiter=maxiter,
                         theta0=grid, rel_weights=rel, lag_ops=lag_ops,
-                        extra=None if tones is None else tone_columns(tones, n, taus, dt, lag_arr))
+                        extra=None if tones is None else tone_columns(tones, n, taus, dt, lag_arr), colour=colour)
         full, grid, pred, it, res = out[:5]
         if k == passes:
             break

@@ -318,6 +318,11 @@ def test_restoration_round_trips_through_its_file(tiny_restored):
         assert 0 <= rec.unobservable_rms_rad <= rec.floor_rms_rad + rec.unobservable_rms_rad and rec.floor_rms_rad > 0
         for k in ("freq", "psd", "noise_std"):  # the prior wiener estimated from the data
             np.testing.assert_array_equal(getattr(got.spectrum, k), getattr(rec.spectrum, k))
+        # the noise colour the MAP weighed its residual with (restoration.noise_colour_weighting): ≥ 1, kept
+        assert rec.spectrum.noise_colour is not None and np.all(rec.spectrum.noise_colour[1] >= 1.0)
+        for x, y in zip(got.spectrum.noise_colour, rec.spectrum.noise_colour):
+            np.testing.assert_array_equal(x, y)
+        np.testing.assert_array_equal(got.rerun(), rec.increment)  # the file's frozen filter is the one applied
     assert set(back.sigma) == set(res.sigma) == set(res.settings.axes)
     for a in res.sigma:
         np.testing.assert_array_equal(back.sigma[a], res.sigma[a])
@@ -367,6 +372,20 @@ def test_a_sigma_limit_below_every_line_flags_them_all_and_says_so(tiny_restored
     shutil.copytree(d, run)
     with pytest.raises(RestorationError, match="flagged for a predicted σ above restoration.max_sigma_px"):
         restore_run(run, progress=False, overrides={"max_sigma_px": 1e-6})
+
+
+def test_noise_colour_weighting_off_integrates_white_and_records_no_colour(tiny_restored, tmp_path):
+    d, res = tiny_restored
+    run = tmp_path / "tiny"
+    shutil.copytree(d, run)
+    off = restore_run(run, progress=False, overrides={"noise_colour_weighting": False, "correct_images": False})
+    assert "prior_noise_colour_pitch" not in xr.load_dataset(run / "restoration.nc")
+    for a, rec in off.integration.items():
+        assert rec.spectrum.noise_colour is None
+        # the same differentials and prior: the weighted run differs only by the colour's weighting
+        np.testing.assert_array_equal(rec.diffs, res.integration[a].diffs)
+        assert not np.array_equal(rec.increment, res.integration[a].increment)
+    assert "colour_weighting_s" in res.timings and "colour_weighting_s" not in off.timings
 
 
 def test_posterior_samples_zero_writes_no_sigma_and_one_is_refused(tiny_restored, tmp_path):
