@@ -318,11 +318,7 @@ def test_restoration_round_trips_through_its_file(tiny_restored):
         assert 0 <= rec.unobservable_rms_rad <= rec.floor_rms_rad + rec.unobservable_rms_rad and rec.floor_rms_rad > 0
         for k in ("freq", "psd", "noise_std"):  # the prior wiener estimated from the data
             np.testing.assert_array_equal(getattr(got.spectrum, k), getattr(rec.spectrum, k))
-        # the noise colour the MAP weighed its residual with (restoration.noise_colour_weighting): ≥ 1, kept
-        assert rec.spectrum.noise_colour is not None and np.all(rec.spectrum.noise_colour[1] >= 1.0)
-        for x, y in zip(got.spectrum.noise_colour, rec.spectrum.noise_colour):
-            np.testing.assert_array_equal(x, y)
-        np.testing.assert_array_equal(got.rerun(), rec.increment)  # the file's frozen filter is the one applied
+        assert rec.spectrum.noise_colour is None and got.spectrum.noise_colour is None  # weighting off by default
     assert set(back.sigma) == set(res.sigma) == set(res.settings.axes)
     for a in res.sigma:
         np.testing.assert_array_equal(back.sigma[a], res.sigma[a])
@@ -374,18 +370,28 @@ def test_a_sigma_limit_below_every_line_flags_them_all_and_says_so(tiny_restored
         restore_run(run, progress=False, overrides={"max_sigma_px": 1e-6})
 
 
-def test_noise_colour_weighting_off_integrates_white_and_records_no_colour(tiny_restored, tmp_path):
+def test_noise_colour_weighting_integrates_again_and_the_file_keeps_the_colour(tiny_restored, tmp_path):
+    """restoration.noise_colour_weighting: the same differentials and prior, integrated again with the residual
+    weighed by the measured colour (≥ 1); the colour is written with the prior and the file's frozen filter
+    reproduces the increment."""
+    from restore.restoration_io import read_restoration
+
     d, res = tiny_restored
     run = tmp_path / "tiny"
     shutil.copytree(d, run)
-    off = restore_run(run, progress=False, overrides={"noise_colour_weighting": False, "correct_images": False})
-    assert "prior_noise_colour_pitch" not in xr.load_dataset(run / "restoration.nc")
-    for a, rec in off.integration.items():
-        assert rec.spectrum.noise_colour is None
-        # the same differentials and prior: the weighted run differs only by the colour's weighting
+    on = restore_run(run, progress=False, overrides={"noise_colour_weighting": True, "correct_images": False})
+    assert "prior_noise_colour_pitch" in xr.load_dataset(run / "restoration.nc")
+    back = read_restoration(run / "restoration.nc")
+    for a, rec in on.integration.items():
+        assert rec.spectrum.noise_colour is not None and np.all(rec.spectrum.noise_colour[1] >= 1.0)
         np.testing.assert_array_equal(rec.diffs, res.integration[a].diffs)
+        np.testing.assert_array_equal(rec.spectrum.psd, res.integration[a].spectrum.psd)
         assert not np.array_equal(rec.increment, res.integration[a].increment)
-    assert "colour_weighting_s" in res.timings and "colour_weighting_s" not in off.timings
+        got = back.integration[a]
+        for x, y in zip(got.spectrum.noise_colour, rec.spectrum.noise_colour):
+            np.testing.assert_array_equal(x, y)
+        np.testing.assert_array_equal(got.rerun(), rec.increment)
+    assert "colour_weighting_s" in on.timings and "colour_weighting_s" not in res.timings
 
 
 def test_posterior_samples_zero_writes_no_sigma_and_one_is_refused(tiny_restored, tmp_path):
