@@ -168,7 +168,7 @@ MEANING = {
     "where the matching noise exceeds the white model), then predict σ again. Off by default: it lowers the "
     "error where the matching noise rises at low frequencies (stress suite's low_frequencies and "
     "geo_noisy_knowledge) but raises it where the residual's excess is a signal the prior underrates "
-    "(damped_chirp's roll 0.032 → 0.041 px)",
+    "(damped_chirp's roll 0.032 → 0.037 px)",
     "restoration.posterior_samples": "Monte Carlo draws through the integration for the predicted 1-σ per line "
                                      "(restoration.nc sigma_<axis>); 0: none",
     "restoration.max_sigma_px": "lines whose predicted σ exceeds this [px] are flagged and not restored; \"auto\": "

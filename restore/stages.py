@@ -711,6 +711,23 @@ def yaw_pitch_coupling(pairs: list) -> float:
 
 
 # --------------------------------------------------------------------------- uncertainty
+def noise_share_of_excess(colour: np.ndarray, freq: np.ndarray, spectrum, taus, dt: float) -> np.ndarray:
+    """The part of a residual's excess over white that is the noise's: ``1 + (c − 1) ν / (ν + |G|² S)``.
+
+    A fit residual above the white model's is noise the model lacks, or a
+    signal the prior underrates (a chirp's onset, a transient), in proportion
+    to how much of the pair's power each holds there: where the attitude seen
+    through the pair, ``|G_j|² S``, dwarfs the noise ``ν_j = σ_j² Δt``, a few
+    % of misfit make the excess, and weighing the residual down would lose
+    the signal; where the noise dominates it is the noise's.
+    """
+    s = np.interp(freq, spectrum.freq, spectrum.psd)
+    nu = np.asarray(spectrum.noise_std, dtype=np.float64) ** 2 * dt
+    g2 = 2 * (1 - np.cos(2 * np.pi * freq[None, :] * np.asarray(taus, dtype=np.float64)[:, None]))
+    share = nu[:, None] / (nu[:, None] + g2 * s[None, :])
+    return 1.0 + (np.asarray(colour, dtype=np.float64) - 1.0) * share
+
+
 def colour_weighted(record: IntegrationRecord, colour) -> IntegrationRecord | None:
     """The axis's integration again, its prior frozen, weighing each pair's residual by the inverse of the
     noise colour the predicted σ's check measured; None where the method cannot or there is no colour.
@@ -722,7 +739,8 @@ def colour_weighted(record: IntegrationRecord, colour) -> IntegrationRecord | No
     ``rfftfreq(lines, Δt)``) is :attr:`restore.posterior.PosteriorSigma.colour_estimate`,
     taken ≥ 1: it lowers the weight where the noise exceeds the white model,
     never raises it (the white level is measured where the pairs are blind,
-    below it the ratio is the estimate's own scatter).
+    below it the ratio is the estimate's own scatter), and only by the
+    noise's share of the excess (:func:`noise_share_of_excess`).
     """
     if colour is None or record.spectrum is None or not integration_method(record.method).noise_colour:
         return None
@@ -730,7 +748,9 @@ def colour_weighted(record: IntegrationRecord, colour) -> IntegrationRecord | No
     col = np.maximum(np.asarray(colour, dtype=np.float64), 1.0)
     if col.shape != (len(record.taus), n // 2 + 1) or not np.all(np.isfinite(col)):
         return None
-    spectrum = replace(record.spectrum, noise_colour=(np.fft.rfftfreq(n, record.line_period_s), col))
+    f = np.fft.rfftfreq(n, record.line_period_s)
+    col = noise_share_of_excess(col, f, record.spectrum, record.taus, record.line_period_s)
+    spectrum = replace(record.spectrum, noise_colour=(f, col))
     weighted = replace(record, spectrum=spectrum)
     return replace(weighted, increment=weighted.rerun())
 

@@ -150,3 +150,20 @@ def test_colour_weighting_of_a_record_keeps_its_filter_and_only_lowers_weights(w
     weighted = stages.colour_weighted(rec, colour)
     assert np.nanmax(np.abs(weighted.increment - rec.rerun())) > 1e-3 * np.nanmax(np.abs(rec.increment))
     np.testing.assert_allclose(weighted.rerun(), weighted.increment, rtol=0, atol=1e-12)
+
+
+def test_the_noise_keeps_the_excess_where_it_dominates_and_the_signal_where_it_does():
+    """``1 + (c − 1) ν / (ν + |G|² S)``: with no prior the whole excess is the noise's; at the frequencies where
+    the attitude seen through the pair is 99 × the noise, 1 % of it; a pair blind at f (|G| = 0) keeps it all."""
+    from restore.axis_integration import PriorSpectrum
+
+    dt, tau = 1e-3, 0.01
+    f = np.array([10.0, 25.0, 100.0])
+    g2 = 2 * (1 - np.cos(2 * np.pi * f * tau))                # |G|² at 10, 25 Hz; 0 at 100 Hz (1 / τ)
+    nu = SIGMA ** 2 * dt
+    colour = np.full((1, 3), 5.0)
+    quiet = PriorSpectrum(f, np.zeros(3), np.array([SIGMA]))
+    np.testing.assert_allclose(stages.noise_share_of_excess(colour, f, quiet, [tau], dt), colour)
+    loud = PriorSpectrum(f, np.where(g2 > 0, 99 * nu / np.maximum(g2, 1e-300), 1.0), np.array([SIGMA]))
+    np.testing.assert_allclose(stages.noise_share_of_excess(colour, f, loud, [tau], dt), [[1.04, 1.04, 5.0]],
+                               atol=1e-9)
