@@ -147,7 +147,7 @@ def bench_end_to_end(*, scenario: str, lines: int | None = None, run_dir: str | 
     """Render, restore, and score against truth with the accuracy metric of docs/design.md."""
     over = dict(overrides or {})
     if lines:
-        over["acquisition"] = {"lines": lines}
+        over["acquisition"] = {**dict(over.get("acquisition") or {}), "lines": lines}
     sc = load_scenario(scenario, overrides=over or None)
     rd = Path(run_dir) if run_dir else SCRATCH_DIR / (f"bench_{sc.name}" + (f"_{lines}" if lines else "") +
                                                        (f"_{tag}" if tag else ""))
@@ -275,10 +275,22 @@ def bench_memory(*, scenario: str | None = None, lines: int | None = None,
     return {"scenario": sc, "rows": rows, "cpu_count": os.cpu_count(), "scratch": str(SCRATCH_DIR)}
 
 
+#: the benchmarks that take scenario overrides (``overrides=``, ``simsat bench … --set KEY=VALUE``)
+OVERRIDABLE = ("robustness", "regression")
+
+
 def run_bench(what: str, *, scenario: str | None = None, out: str | None = None, lines: int | None = None,
-              seed: int = 0, history: str | Path | None = HISTORY_FILE) -> dict:
+              seed: int = 0, history: str | Path | None = HISTORY_FILE, overrides: dict | None = None) -> dict:
     """Run one benchmark, write its JSON, append its record to the accuracy ``history`` (None: not), return
-    the result (with ``_path`` and ``_history``)."""
+    the result (with ``_path`` and ``_history``).
+
+    ``overrides``: scenario keys set on every scenario of the suite (e.g.
+    ``{"restoration": {"noise_colour_weighting": True}}``), for the benchmarks
+    of :data:`OVERRIDABLE` only; they are recorded in the result and the
+    history's settings, and the runs go to their own scratch directories.
+    """
+    if overrides and what not in OVERRIDABLE:
+        raise ValueError(f"overrides: only the {' and '.join(OVERRIDABLE)} benchmarks take them, not {what!r}")
     t0 = _time.perf_counter()
     if what == "render":
         result = bench_render(scenario=scenario, lines=lines)
@@ -291,9 +303,9 @@ def run_bench(what: str, *, scenario: str | None = None, out: str | None = None,
     elif what == "memory":
         result = bench_memory(scenario=scenario, lines=lines)
     elif what == "robustness":
-        result = bench_robustness(lines=lines)
+        result = bench_robustness(lines=lines, overrides=overrides)
     elif what == "regression":
-        result = bench_regression(lines=lines)
+        result = bench_regression(lines=lines, overrides=overrides)
     elif what == "navigation":
         from . import bench_navigation
 
@@ -301,12 +313,15 @@ def run_bench(what: str, *, scenario: str | None = None, out: str | None = None,
     else:
         raise ValueError(f"what: unknown benchmark {what!r}")
     result = {"benchmark": what, "result": result, "wall_s": _time.perf_counter() - t0,
-              "date": _time.strftime("%Y-%m-%dT%H:%M:%S")}
-    path = Path(out) if out else Path("bench") / f"{what}.json"
+              "date": _time.strftime("%Y-%m-%dT%H:%M:%S"), "overrides": dict(overrides or {})}
+    path = Path(out) if out else Path("bench") / (f"{what}_set.json" if overrides else f"{what}.json")
     atomic_write_json(result, path)
     result["_path"] = str(path)
     if history is not None:
-        rec = make_record(what, result["result"], settings={"scenario": scenario, "lines": lines, "seed": seed})
+        settings = {"scenario": scenario, "lines": lines, "seed": seed}
+        if overrides:
+            settings["overrides"] = dict(overrides)
+        rec = make_record(what, result["result"], settings=settings)
         result["_history"] = str(append_record(rec, history))
     return result
 
@@ -375,14 +390,15 @@ def builtin_scenarios(*, include_full: bool = False) -> dict:
     return out
 
 
-def bench_regression(*, lines: int | None = None) -> dict:
+def bench_regression(*, lines: int | None = None, overrides: dict | None = None) -> dict:
     """Every built-in scenario (not phr_full: minutes of rendering) and the stress suite, each checked against
     its own ``[scenario.requirement]`` (a failing run is recorded, not fatal)."""
     runs = []
     for name, path in {**builtin_scenarios(), **stress_scenarios()}.items():
         try:
-            e = bench_end_to_end(scenario=str(path), lines=lines, tag="regression")
-            req = load_scenario(str(path)).requirement.get("max_rms_px") or 0.05
+            e = bench_end_to_end(scenario=str(path), lines=lines, overrides=overrides,
+                                 tag="regression" + ("_set" if overrides else ""))
+            req = load_scenario(str(path), overrides=overrides or None).requirement.get("max_rms_px") or 0.05
             axes = [a for a in ("roll", "pitch") if a in e["errors"]]
             worst = max(e["errors"][a]["rms_px"] for a in axes)
             runs.append({**{k: e[k] for k in ("scenario", "lines", "errors", "coverage", "restore_s", "render_s")},
@@ -457,7 +473,7 @@ def unmet_criteria(row: dict) -> list:
     return out
 
 
-def bench_robustness(*, lines: int | None = None) -> dict:
+def bench_robustness(*, lines: int | None = None, overrides: dict | None = None) -> dict:
     """Render, restore and score every scenario of the stress suite (a failing one is recorded, not fatal).
 
     Per scenario: RMS and 99.7 % per restored axis [px], the AOCS knowledge's
@@ -468,8 +484,10 @@ def bench_robustness(*, lines: int | None = None) -> dict:
     for name, path in stress_scenarios().items():
         row = {"scenario": name, "file": str(path)}
         try:
-            e = bench_end_to_end(scenario=str(path), lines=lines, tag="stress")
-            req = load_scenario(str(path)).requirement.get("max_rms_px") or 0.05
+            e = bench_end_to_end(scenario=str(path), lines=lines, overrides=overrides,
+                                 tag="stress" + ("_set" if overrides else ""))
+            scenario = load_scenario(str(path), overrides=overrides or None)
+            req = scenario.requirement.get("max_rms_px") or 0.05
             res = read_restoration(Path(e["run_dir"]) / "restoration.nc")
             axes = list(res.settings.axes)
             px = res.pixel_ifov_rad
@@ -492,7 +510,7 @@ def bench_robustness(*, lines: int | None = None) -> dict:
             pred = {a: res.detrended_rms.get(a, np.nan) / px for a in axes if a in res.sigma}
             row["predicted_detrended_rms_px"] = pred
             row["actual_over_predicted"] = {a: split[a].get("detrended_rms", np.nan) / px / pred[a] for a in pred}
-            clear = clear_line_fraction(read_product(e["run_dir"]), load_scenario(str(path)).texture())
+            clear = clear_line_fraction(read_product(e["run_dir"]), scenario.texture())
             known = not np.all(np.isnan(clear))       # an orthoimage does not know its land cover
             row["clear_lines"] = float(np.mean(clear >= CLEAR_LINE_MIN_FRACTION)) if known else float("nan")
             row["coverage_of_clear_lines"] = {a: clear_line_coverage(res.restored[a], clear) if known

@@ -222,9 +222,12 @@ def cmd_bench(args) -> int:
         return 1 if any(c.regression for c in changes) else 0
     from reports import bench  # matplotlib, Mitsuba: heavy
 
+    overrides = _parse_set(args.set)
+    if overrides and args.what not in bench.OVERRIDABLE:
+        raise CliError(f"--set: only `simsat bench {' / '.join(bench.OVERRIDABLE)}` take scenario overrides")
     result = bench.run_bench(args.what, scenario=args.scenario, out=args.out,
                              lines=args.seeds if args.what == "navigation" else args.lines, seed=args.seed,
-                             history=args.history)
+                             history=args.history, overrides=overrides)
     print(bench.format_result(args.what, result))
     print(f"\nwrote {result['_path']}; appended to the accuracy history {result['_history']} "
           f"(`simsat bench compare` sets it against the previous run)")
@@ -364,6 +367,10 @@ def _add_study_and_bench(sub, quiet_help: str) -> None:
                    help="accuracy history every bench appends to, and compare reads (default: %(default)s)")
     s.add_argument("--benchmark", default=None, help="compare: which benchmark's records (default: the last run)")
     s.add_argument("--seeds", type=int, default=None, help="navigation: Monte Carlo seeds (default: the scenario's)")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="robustness / regression: override a key of every scenario, e.g. "
+                        "--set restoration.noise_colour_weighting=true (value in TOML syntax; the runs go to their "
+                        "own scratch directories and the JSON to bench/<what>_set.json unless --out says)")
     s.set_defaults(func=cmd_bench)
 
 

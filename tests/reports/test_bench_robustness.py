@@ -80,3 +80,41 @@ def test_a_row_passing_only_outside_the_unobservable_part_says_so():
     text = "\n".join(_format_robustness({"rows": [row], "lines": None}))
     assert "PASS outside the unobservable part" in text
     assert "pitch: trend 0.096, band 0.002" in text
+
+
+def test_suite_overrides_reach_every_run_and_are_recorded(monkeypatch, tmp_path):
+    """``simsat bench robustness --set KEY=VALUE``: the override goes to every scenario's run (in its own
+    scratch directory), into the result and the history, and the JSON defaults to bench/robustness_set.json."""
+    import json
+
+    from reports import bench
+
+    calls = []
+
+    def fake_end_to_end(**kw):
+        calls.append(kw)
+        raise RuntimeError("not rendered in this test")
+
+    monkeypatch.setattr(bench, "bench_end_to_end", fake_end_to_end)
+    monkeypatch.setattr(bench, "stress_scenarios", lambda: {"one": tmp_path / "one.toml"})
+    monkeypatch.chdir(tmp_path)
+    over = {"restoration": {"noise_colour_weighting": True}}
+    result = bench.run_bench("robustness", overrides=over, history=tmp_path / "history.jsonl")
+    assert calls and calls[0]["overrides"] == over and calls[0]["tag"] == "stress_set"
+    assert result["result"]["rows"][0]["error"].startswith("RuntimeError")
+    assert result["_path"] == "bench/robustness_set.json" and result["overrides"] == over
+    assert json.loads((tmp_path / "bench" / "robustness_set.json").read_text())["overrides"] == over
+    record = json.loads((tmp_path / "history.jsonl").read_text().splitlines()[-1])
+    assert record["settings"]["overrides"] == over
+
+
+def test_overrides_are_refused_where_a_benchmark_does_not_take_them(monkeypatch, capsys):
+    import pytest
+
+    from reports import bench
+    import simsat_cli
+
+    with pytest.raises(ValueError, match="only the robustness and regression"):
+        bench.run_bench("render", overrides={"acquisition": {"lines": 64}}, history=None)
+    rc = simsat_cli.main(["bench", "matching", "--set", "restoration.noise_colour_weighting=true"])
+    assert rc != 0 and "--set: only `simsat bench robustness / regression`" in capsys.readouterr().err
