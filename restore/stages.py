@@ -19,6 +19,7 @@ from .axis_integration import integrate_axis
 from .correction import correct_bands, line_median, misregistration, rank_within_line, weak_band_misregistration
 from .errors import RestorationError
 from .integration.methods import integration_method
+from .integration.transfer import pair_snr
 from .integration.wiener import spectrum_for_lines
 from .matching import match_points, support_margin
 from .method_choice import predicted_differential, resolve_method
@@ -41,7 +42,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "colour_weighted", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "colour_weighted", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -721,11 +722,8 @@ def noise_share_of_excess(colour: np.ndarray, freq: np.ndarray, spectrum, taus, 
     % of misfit make the excess, and weighing the residual down would lose
     the signal; where the noise dominates it is the noise's.
     """
-    s = np.interp(freq, spectrum.freq, spectrum.psd)
-    nu = np.asarray(spectrum.noise_std, dtype=np.float64) ** 2 * dt
-    g2 = 2 * (1 - np.cos(2 * np.pi * freq[None, :] * np.asarray(taus, dtype=np.float64)[:, None]))
-    share = nu[:, None] / (nu[:, None] + g2 * s[None, :])
-    return 1.0 + (np.asarray(colour, dtype=np.float64) - 1.0) * share
+    snr = pair_snr(freq, np.interp(freq, spectrum.freq, spectrum.psd), spectrum.noise_std, taus, dt)
+    return 1.0 + (np.asarray(colour, dtype=np.float64) - 1.0) / (1.0 + snr)
 
 
 def colour_weighted(record: IntegrationRecord, colour) -> IntegrationRecord | None:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["pair_transfer", "wiener_gain", "chain_gain", "blind_frequencies", "fused_gains", "fused_snr",
+__all__ = ["pair_transfer", "wiener_gain", "chain_gain", "blind_frequencies", "fused_gains", "pair_snr", "fused_snr",
            "fused_chain_gain", "noise_gain"]
 
 
@@ -122,13 +122,19 @@ def noise_gain(freq_hz, taus_s, **kwargs) -> np.ndarray:
     return (np.abs(h) ** 2).sum(0)
 
 
-def fused_snr(freq, psd, noise_std, taus, dt: float) -> np.ndarray:
-    """``Σ_j |G_j(f)|² S(f) / (σ_j² Δt)`` on ``freq`` [Hz] (``psd`` two-sided [rad²/Hz], σ_j [rad/line])."""
+def pair_snr(freq, psd, noise_std, taus, dt: float) -> np.ndarray:
+    """``|G_j(f)|² S(f) / (σ_j² Δt)`` per pair (pair, freq) on ``freq`` [Hz] (``psd`` two-sided [rad²/Hz],
+    σ_j [rad/line])."""
     f = np.asarray(freq, dtype=np.float64)
     s = np.asarray(psd, dtype=np.float64)
     sig = np.broadcast_to(np.asarray(noise_std, dtype=np.float64), (len(taus),))
-    acc = np.zeros(f.shape)
-    for tau, sj in zip(taus, sig):
+    out = np.empty((len(taus),) + f.shape)
+    for j, (tau, sj) in enumerate(zip(taus, sig)):
         g2 = 2.0 * (1.0 - np.cos(2.0 * np.pi * f * tau))
-        acc += g2 * s / max(sj * sj * dt, 1e-300)
-    return acc
+        out[j] = g2 * s / max(sj * sj * dt, 1e-300)
+    return out
+
+
+def fused_snr(freq, psd, noise_std, taus, dt: float) -> np.ndarray:
+    """``Σ_j |G_j(f)|² S(f) / (σ_j² Δt)`` on ``freq`` [Hz] (:func:`pair_snr` summed over the pairs)."""
+    return pair_snr(freq, psd, noise_std, taus, dt).sum(0)
