@@ -285,7 +285,7 @@ def run_bench(what: str, *, scenario: str | None = None, out: str | None = None,
     the result (with ``_path`` and ``_history``).
 
     ``overrides``: scenario keys set on every scenario of the suite (e.g.
-    ``{"restoration": {"noise_colour_weighting": True}}``), for the benchmarks
+    ``{"restoration": {"noise_colour_weighting": False}}``), for the benchmarks
     of :data:`OVERRIDABLE` only; they are recorded in the result and the
     history's settings, and the runs go to their own scratch directories.
     """

@@ -164,11 +164,10 @@ MEANING = {
     "restoration.rematch_search_lines": "search half-range of the rematch, lines [px]",
     "restoration.rematch_search_columns": "search half-range of the rematch, columns [px]",
     "restoration.noise_colour_weighting": "after the predicted σ, integrate each axis again (its prior frozen) "
-    "weighing the pairs' residuals by the noise colour the σ's check of the fit residual measured (≥ 1: only "
-    "where the matching noise exceeds the white model), then predict σ again. Off by default: it lowers the "
-    "error where the matching noise rises at low frequencies (stress suite's low_frequencies and "
-    "geo_noisy_knowledge) but raises it where the residual's excess is a signal the prior underrates "
-    "(damped_chirp's roll 0.032 → 0.037 px)",
+    "weighing the pairs' residuals by the noise colour the σ's check of the fit residual measured, only by the "
+    "part of the excess the AOCS knowledge proves is noise (what exceeds the most signal its ceiling leaves "
+    "room for), then predict σ again. On by default; an axis whose product does not record its knowledge's "
+    "filter, or with restoration.knowledge_prior = false, is not weighed",
     "restoration.posterior_samples": "Monte Carlo draws through the integration for the predicted 1-σ per line "
                                      "(restoration.nc sigma_<axis>); 0: none",
     "restoration.max_sigma_px": "lines whose predicted σ exceeds this [px] are flagged and not restored; \"auto\": "

@@ -95,7 +95,8 @@ class Restorer:
             timings["posterior_s"] = _time.perf_counter() - t
             pairs, records, estimate, sigma = self.lower_highpass(product, pairs, knowledge, records, estimate,
                                                                    sigma, timings, bar)
-            records, estimate, sigma = self.weigh_noise_colour(product, records, estimate, sigma, timings, bar)
+            records, estimate, sigma = self.weigh_noise_colour(product, knowledge, records, estimate, sigma, timings,
+                                                                bar)
             s = self.settings
             estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad)
             correction = stages.remove_mean(estimate, s.axes)
@@ -248,27 +249,37 @@ class Restorer:
                 for a in s.axes}
         return recs, {a: r.increment for a, r in recs.items()}
 
-    def weigh_noise_colour(self, product: Product, records: dict, estimate: dict, sigma: dict, timings: dict,
-                           bar) -> tuple:
+    def weigh_noise_colour(self, product: Product, knowledge: dict, records: dict, estimate: dict, sigma: dict,
+                           timings: dict, bar) -> tuple:
         """With ``noise_colour_weighting``: integrate each axis again weighing the pairs' residuals by the noise
-        colour its predicted σ's check measured (:func:`stages.colour_weighted`), then predict σ again.
+        colour its predicted σ's check measured, where the AOCS knowledge proves the excess is noise
+        (:func:`stages.colour_weighted` with the knowledge's ceiling), then predict σ again.
 
-        Returns (records, estimate, sigma), new where an axis was weighted, as given otherwise.
+        An axis without a ceiling (knowledge prior off, or a product that does
+        not record its knowledge's filter) is left as it is. Returns (records,
+        estimate, sigma), new where an axis was weighted, as given otherwise.
         """
         s = self.settings
         if not s.noise_colour_weighting or not sigma:
             return records, estimate, sigma
         t = _time.perf_counter()
-        bar.note("integrating again, weighed by the measured noise colour")
+        ceilings = stages.knowledge_ceilings(product, knowledge, s)
         records, estimate = dict(records), dict(estimate)
+        weighted_any = False
         for a, rec in list(records.items()):
             ps = sigma.get(a)
-            weighted = stages.colour_weighted(rec, None if ps is None else ps.colour_estimate)
+            if ps is None or ceilings.get(a) is None:
+                continue
+            weighted = stages.colour_weighted(rec, ps.colour_estimate, ceilings[a])
             if weighted is None:
                 continue
+            if not weighted_any:
+                bar.note("integrating again, weighed by the measured noise colour")
+            weighted_any = True
             records[a] = weighted
             estimate[a] = np.where(np.isfinite(weighted.increment), weighted.previous + weighted.increment, np.nan)
-        sigma = stages.predicted_sigma(records, product, s)
+        if weighted_any:
+            sigma = stages.predicted_sigma(records, product, s)
         timings["colour_weighting_s"] = _time.perf_counter() - t
         return records, estimate, sigma
 

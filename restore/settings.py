@@ -47,7 +47,7 @@ class RestorationSettings:
     tdi_mean_attitude: bool = True
     min_coverage: float = 0.05
     posterior_samples: int = 8
-    noise_colour_weighting: bool = False
+    noise_colour_weighting: bool = True
     knowledge_prior: bool = True
     rematch: int | str = "auto"
     rematch_search: tuple = (2, 2)

@@ -20,7 +20,7 @@ from .correction import correct_bands, line_median, misregistration, rank_within
 from .errors import RestorationError
 from .integration.methods import integration_method
 from .integration.transfer import pair_snr
-from .integration.wiener import spectrum_for_lines
+from .integration.wiener import ceiling_on_grid, spectrum_for_lines
 from .matching import match_points, support_margin
 from .method_choice import predicted_differential, resolve_method
 from .observability import observability
@@ -42,7 +42,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "colour_weighted", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -726,7 +726,35 @@ def noise_share_of_excess(colour: np.ndarray, freq: np.ndarray, spectrum, taus, 
     return 1.0 + (np.asarray(colour, dtype=np.float64) - 1.0) / (1.0 + snr)
 
 
-def colour_weighted(record: IntegrationRecord, colour) -> IntegrationRecord | None:
+def excess_the_knowledge_proves_noise(colour: np.ndarray, freq: np.ndarray, spectrum, taus, dt: float,
+                                      ceiling) -> np.ndarray:
+    """The part of a residual's excess over white that the AOCS knowledge proves is noise:
+    ``1 + max(c − 1 − |G_j|² (C − S) / ν_j, 0)``.
+
+    A fit residual above the white model's (``c × ν_j``, ν_j the pair's white
+    noise density) is noise the model lacks, or a signal the prior ``S``
+    underrates. The signal the MAP leaves in pair ``j``'s residual is at
+    most what the prior misses of it seen through the pair, ``|G_j|² (S_true −
+    S)``, and where the AOCS knowledge bounds the attitude it must restore
+    (its ceiling ``C ≥ S_true``, :mod:`restore.knowledge_prior`) that is at
+    most ``|G_j|² (C − S)``, in units of ν_j ``SNR_j (C/S − 1)`` (``SNR_j = |G_j|² S / ν_j``,
+    :func:`~restore.integration.transfer.pair_snr`). What exceeds it can only
+    be noise. Where the knowledge says nothing (``C`` infinite: well above its
+    cut-off) nothing is proven and the colour is 1, unless the pair sees no
+    signal there at all (``|G_j| = 0``: its residual is its noise). ``colour`` (pair, freq);
+    ``ceiling`` (freq, ceiling) as :func:`knowledge_ceilings` gives it.
+    """
+    f = np.asarray(freq, dtype=np.float64)
+    col = np.maximum(np.asarray(colour, dtype=np.float64), 1.0)
+    room = np.maximum(ceiling_on_grid(ceiling, f) - np.interp(f, spectrum.freq, spectrum.psd), 0.0)
+    gain = pair_snr(f, np.ones_like(f), spectrum.noise_std, taus, dt)          # |G_j|² / ν_j
+    with np.errstate(invalid="ignore"):
+        # a pair blind at f (|G_j| = 0) sees no signal there: its excess is all noise
+        misfit = np.where(gain > 0, gain * room[None, :], 0.0)
+    return 1.0 + np.maximum(col - 1.0 - misfit, 0.0)
+
+
+def colour_weighted(record: IntegrationRecord, colour, ceiling=None) -> IntegrationRecord | None:
     """The axis's integration again, its prior frozen, weighing each pair's residual by the inverse of the
     noise colour the predicted σ's check measured; None where the method cannot or there is no colour.
 
@@ -739,6 +767,13 @@ def colour_weighted(record: IntegrationRecord, colour) -> IntegrationRecord | No
     never raises it (the white level is measured where the pairs are blind,
     below it the ratio is the estimate's own scatter), and only by the
     noise's share of the excess (:func:`noise_share_of_excess`).
+
+    ``ceiling`` (freq, ceiling): the AOCS knowledge's bound on the attitude
+    (:func:`knowledge_ceilings`); given, only the excess it proves is noise
+    counts (:func:`excess_the_knowledge_proves_noise`), and where that leaves
+    nothing the record is not integrated again (None). The pipeline always
+    gives it: an excess that could be a signal the prior underrates (a chirp's
+    onset) is not weighed down.
     """
     if colour is None or record.spectrum is None or not integration_method(record.method).noise_colour:
         return None
@@ -747,6 +782,10 @@ def colour_weighted(record: IntegrationRecord, colour) -> IntegrationRecord | No
     if col.shape != (len(record.taus), n // 2 + 1) or not np.all(np.isfinite(col)):
         return None
     f = np.fft.rfftfreq(n, record.line_period_s)
+    if ceiling is not None:
+        col = excess_the_knowledge_proves_noise(col, f, record.spectrum, record.taus, record.line_period_s, ceiling)
+        if np.all(col == 1.0):
+            return None
     col = noise_share_of_excess(col, f, record.spectrum, record.taus, record.line_period_s)
     spectrum = replace(record.spectrum, noise_colour=(f, col))
     weighted = replace(record, spectrum=spectrum)

@@ -369,7 +369,7 @@ def _add_study_and_bench(sub, quiet_help: str) -> None:
     s.add_argument("--seeds", type=int, default=None, help="navigation: Monte Carlo seeds (default: the scenario's)")
     s.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="robustness / regression: override a key of every scenario, e.g. "
-                        "--set restoration.noise_colour_weighting=true (value in TOML syntax; the runs go to their "
+                        "--set restoration.noise_colour_weighting=false (value in TOML syntax; the runs go to their "
                         "own scratch directories and the JSON to bench/<what>_set.json unless --out says)")
     s.set_defaults(func=cmd_bench)
 

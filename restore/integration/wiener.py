@@ -35,7 +35,7 @@ from .gaps import estimable_mask
 from .spectrum import SpectralEstimate, estimate_spectrum, notch_mask
 
 __all__ = ["integrate_inverse", "integrate_wiener_fft", "integrate_wiener", "WienerResult", "spectrum_for_lines",
-           "lag_interpolation", "tone_order"]
+           "lag_interpolation", "tone_order", "ceiling_on_grid"]
 
 
 def _grid(n: int, taus: np.ndarray, dt: float, pad_fraction: float, max_lag_s: float = 0.0) -> int:
@@ -118,7 +118,9 @@ def _psd_on_grid(psd, f: np.ndarray) -> np.ndarray:
     return s
 
 
-def _ceiling_on_grid(ceiling, f: np.ndarray) -> np.ndarray:
+def ceiling_on_grid(ceiling, f: np.ndarray) -> np.ndarray:
+    """A PSD ceiling ``(freq, ceiling)`` (:func:`restore.knowledge_prior.knowledge_psd_ceiling`) at the
+    frequencies ``f``: interpolated, infinite beyond its end and next to an infinite value."""
     fc, cc = (np.asarray(x, dtype=np.float64) for x in ceiling)
     if fc.shape != cc.shape or fc.ndim != 1 or np.any(np.diff(fc) <= 0) or np.any(np.isnan(cc)) or np.any(cc < 0):
         raise ValueError("psd_ceiling: must be (freq, ceiling) with increasing frequencies and ceilings >= 0")
@@ -473,7 +475,7 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
     passes = 0 if psd is not None else int(refine)
     colour = None if noise_colour is None else _colour_on_grid(noise_colour, spec.freq, p)
     grid = None
-    ceiling = None if psd is not None or psd_ceiling is None else _ceiling_on_grid(psd_ceiling, spec.freq)
+    ceiling = None if psd is not None or psd_ceiling is None else ceiling_on_grid(psd_ceiling, spec.freq)
     for k in range(passes + 1):
         if ceiling is not None:
             spec.psd = np.minimum(spec.psd, ceiling)

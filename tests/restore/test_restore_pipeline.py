@@ -318,7 +318,11 @@ def test_restoration_round_trips_through_its_file(tiny_restored):
         assert 0 <= rec.unobservable_rms_rad <= rec.floor_rms_rad + rec.unobservable_rms_rad and rec.floor_rms_rad > 0
         for k in ("freq", "psd", "noise_std"):  # the prior wiener estimated from the data
             np.testing.assert_array_equal(getattr(got.spectrum, k), getattr(rec.spectrum, k))
-        assert rec.spectrum.noise_colour is None and got.spectrum.noise_colour is None  # weighting off by default
+        if rec.spectrum.noise_colour is None:
+            assert got.spectrum.noise_colour is None
+        else:  # weighed by the noise colour the knowledge proves (on by default): kept with the prior
+            for x, y in zip(got.spectrum.noise_colour, rec.spectrum.noise_colour):
+                np.testing.assert_array_equal(x, y)
     assert set(back.sigma) == set(res.sigma) == set(res.settings.axes)
     for a in res.sigma:
         np.testing.assert_array_equal(back.sigma[a], res.sigma[a])
@@ -371,27 +375,38 @@ def test_a_sigma_limit_below_every_line_flags_them_all_and_says_so(tiny_restored
 
 
 def test_noise_colour_weighting_integrates_again_and_the_file_keeps_the_colour(tiny_restored, tmp_path):
-    """restoration.noise_colour_weighting: the same differentials and prior, integrated again with the residual
-    weighed by the measured colour (≥ 1); the colour is written with the prior and the file's frozen filter
-    reproduces the increment."""
+    """restoration.noise_colour_weighting (on by default): the same differentials and prior as without it,
+    integrated again with the residual weighed by the colour the knowledge proves noise (≥ 1); the colour is
+    written with the prior and the file's frozen filter reproduces the increment. Off: no colour, and a product
+    that does not record its knowledge's filter is not weighed either (nothing bounds the signal)."""
     from restore.restoration_io import read_restoration
 
-    d, res = tiny_restored
+    d, on = tiny_restored
     run = tmp_path / "tiny"
     shutil.copytree(d, run)
-    on = restore_run(run, progress=False, overrides={"noise_colour_weighting": True, "correct_images": False})
-    assert "prior_noise_colour_pitch" in xr.load_dataset(run / "restoration.nc")
-    back = read_restoration(run / "restoration.nc")
-    for a, rec in on.integration.items():
-        assert rec.spectrum.noise_colour is not None and np.all(rec.spectrum.noise_colour[1] >= 1.0)
-        np.testing.assert_array_equal(rec.diffs, res.integration[a].diffs)
-        np.testing.assert_array_equal(rec.spectrum.psd, res.integration[a].spectrum.psd)
-        assert not np.array_equal(rec.increment, res.integration[a].increment)
+    off = restore_run(run, progress=False, overrides={"noise_colour_weighting": False, "correct_images": False})
+    assert not any(k.startswith("prior_noise_colour") for k in xr.load_dataset(run / "restoration.nc").data_vars)
+    assert "colour_weighting_s" in on.timings and "colour_weighting_s" not in off.timings
+    weighted = [a for a, rec in on.integration.items() if rec.spectrum.noise_colour is not None]
+    assert weighted, "the tiny scene's low-frequency matching noise exceeds what its knowledge allows as signal"
+    back = read_restoration(d / "restoration.nc")
+    for a in weighted:
+        rec = on.integration[a]
+        assert off.integration[a].spectrum.noise_colour is None
+        assert np.all(rec.spectrum.noise_colour[1] >= 1.0) and np.any(rec.spectrum.noise_colour[1] > 1.0)
+        np.testing.assert_array_equal(rec.diffs, off.integration[a].diffs)
+        np.testing.assert_array_equal(rec.spectrum.psd, off.integration[a].spectrum.psd)
+        assert not np.array_equal(rec.increment, off.integration[a].increment)
         got = back.integration[a]
         for x, y in zip(got.spectrum.noise_colour, rec.spectrum.noise_colour):
             np.testing.assert_array_equal(x, y)
         np.testing.assert_array_equal(got.rerun(), rec.increment)
-    assert "colour_weighting_s" in on.timings and "colour_weighting_s" not in res.timings
+    # without the knowledge's filter in the product nothing bounds the signal: no axis is weighed
+    ds = xr.load_dataset(run / "product.nc")
+    ds.attrs.pop("knowledge_cutoff_hz")
+    ds.to_netcdf(run / "product.nc")
+    bare = restore_run(run, progress=False, overrides={"correct_images": False})
+    assert all(rec.spectrum.noise_colour is None for rec in bare.integration.values())
 
 
 def test_posterior_samples_zero_writes_no_sigma_and_one_is_refused(tiny_restored, tmp_path):

@@ -167,3 +167,49 @@ def test_the_noise_keeps_the_excess_where_it_dominates_and_the_signal_where_it_d
     loud = PriorSpectrum(f, np.where(g2 > 0, 99 * nu / np.maximum(g2, 1e-300), 1.0), np.array([SIGMA]))
     np.testing.assert_allclose(stages.noise_share_of_excess(colour, f, loud, [tau], dt), [[1.04, 1.04, 5.0]],
                                atol=1e-9)
+
+
+def test_the_knowledge_proves_noise_only_the_excess_no_underrated_signal_could_make():
+    """``1 + max(c − 1 − |G|² (C − S) / ν, 0)``: with the ceiling at the prior (the knowledge leaves no room
+    for more signal) the whole excess is noise; with room for k × ν of signal seen through the pair, k less;
+    where the knowledge says nothing (infinite ceiling), nothing, except where the pair is blind (|G| = 0)."""
+    from restore.axis_integration import PriorSpectrum
+
+    dt, tau = 1e-3, 0.01
+    f = np.array([10.0, 25.0, 100.0])
+    g2 = 2 * (1 - np.cos(2 * np.pi * f * tau))                # 0 at 100 Hz (1 / τ)
+    nu = SIGMA ** 2 * dt
+    psd = np.array([3.0, 2.0, 1.0]) * nu
+    prior = PriorSpectrum(f, psd, np.array([SIGMA]))
+    colour = np.array([[5.0, 5.0, 5.0]])
+    tight = (f, psd.copy())
+    np.testing.assert_allclose(stages.excess_the_knowledge_proves_noise(colour, f, prior, [tau], dt, tight), colour)
+    k = np.array([1.5, 10.0, 7.0])
+    room = (f, psd + np.where(g2 > 0, k * nu / np.maximum(g2, 1e-300), 1e3 * nu))
+    np.testing.assert_allclose(stages.excess_the_knowledge_proves_noise(colour, f, prior, [tau], dt, room),
+                               [[3.5, 1.0, 5.0]], rtol=1e-9)
+    unknown = (f, np.full(3, np.inf))
+    np.testing.assert_allclose(stages.excess_the_knowledge_proves_noise(colour, f, prior, [tau], dt, unknown),
+                               [[1.0, 1.0, 5.0]])
+    # a colour below white is white
+    np.testing.assert_allclose(stages.excess_the_knowledge_proves_noise(np.full((1, 3), 0.3), f, prior, [tau], dt,
+                                                                        tight), 1.0)
+
+
+def test_a_record_weighs_only_what_its_knowledge_proves_noise(wiener_record):
+    rec = wiener_record
+    n = rec.diffs.shape[1]
+    f = np.fft.rfftfreq(n, rec.line_period_s)
+    colour = np.ones((len(rec.taus), n // 2 + 1))
+    colour[:, 1:40] = 20.0              # (at 0 Hz every pair is blind: an excess there would be noise)
+    # the knowledge knows nothing: not integrated again
+    assert stages.colour_weighted(rec, colour, (f, np.full(f.size, np.inf))) is None
+    # it bounds the attitude at the prior itself: the excess is all noise, weighed as without a ceiling
+    psd = np.interp(f, rec.spectrum.freq, rec.spectrum.psd)
+    tight = stages.colour_weighted(rec, colour, (f, psd))
+    free = stages.colour_weighted(rec, colour)
+    np.testing.assert_array_equal(tight.spectrum.noise_colour[1], free.spectrum.noise_colour[1])
+    np.testing.assert_array_equal(tight.increment, free.increment)
+    # room for a lot of signal at the coloured frequencies: less of the colour survives
+    loose = stages.colour_weighted(rec, colour, (f, psd * 1e3))
+    assert loose is None or np.all(loose.spectrum.noise_colour[1] <= free.spectrum.noise_colour[1])
