@@ -796,15 +796,17 @@ def predicted_sigma(records: dict, product: Product, settings: RestorationSettin
     """Predicted 1-σ per line of each restored axis [rad] (:func:`restore.posterior.posterior_sigma`).
 
     The AOCS knowledge's noise, as the product records it, counts below the
-    high-pass. Returns ``{axis: PosteriorSigma}``; empty with
+    high-pass. Returns ``{axis: PosteriorSigma}`` for the axes of
+    ``records``, each with its own seed whichever others are given; empty with
     ``posterior_samples = 0``.
     """
     if settings.posterior_samples < 2:
         return {}
     noise, rate = product.knowledge_noise or (0.0, None)
-    return {a: posterior_sigma(rec, samples=settings.posterior_samples, seed=k, knowledge_noise_rad=noise,
-                               knowledge_rate_hz=rate)
-            for k, (a, rec) in enumerate(sorted(records.items()))}
+    order = sorted(set(settings.axes) | set(records))
+    return {a: posterior_sigma(rec, samples=settings.posterior_samples, seed=order.index(a),
+                               knowledge_noise_rad=noise, knowledge_rate_hz=rate)
+            for a, rec in sorted(records.items())}
 
 
 #: "auto" ``max_sigma_px``: a line is flagged when its predicted σ exceeds this many times the axis's median
