@@ -241,12 +241,14 @@ def draw_budget(ax, rows: list, *, unit: str = "px"):
     solid bar, beside the measured components.
     """
     comps = [c for c in ("uncorrected knowledge", "unobservable (no pair sees it)", "floor (best linear restoration)",
-                         "matching noise", "model / synthesis", "integration", "star-tracker anchoring",
+                         "matching noise", "model / synthesis", "local matching error", "line-common error",
+                         "integration", "star-tracker anchoring",
                          "total (restored − true)") if any(r["component"] == c for r in rows)]
     axes = [a for a in AXES if any(r["axis"] == a for r in rows)]
     colors = {"uncorrected knowledge": C_KNOW, "unobservable (no pair sees it)": "#444444",
               "floor (best linear restoration)": "#0072B2", "matching noise": "#56B4E9",
-              "model / synthesis": "#CC79A7", "integration": "#009E73", "star-tracker anchoring": "#999999",
+              "model / synthesis": "#CC79A7", "local matching error": "#F0E442", "line-common error": "#D55E00",
+              "integration": "#009E73", "star-tracker anchoring": "#999999",
               "total (restored − true)": C_ERR}
     h = 0.8 / max(1, len(comps))
     yt, yl = [], []

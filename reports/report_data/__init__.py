@@ -33,6 +33,7 @@ from .budget import (
     BUDGET_COMPONENTS,
     axis_integration,
     error_budget,
+    local_errors,
     integration_record,
     line_lags,
     measured_differentials,
@@ -61,4 +62,4 @@ from .transfer import (
     welch_settings,
 )
 
-__all__ = ["AXES", "RunData", "load_run", "get_integrator", "pair_file_tag", "scenario_summary", "restored_axes", "attitude_table", "headline", "minmax_decimate", "longest_finite_run", "zoom_window", "welch_settings", "spectra", "frozen_chain_gain", "probe_window_gain", "integration_probe", "measured_transfer", "analytic_chain_gain", "analytic_joint_gain", "regularisation_k", "transfer_curves", "integration_record", "line_lags", "true_differentials", "measured_differentials", "axis_integration", "error_budget", "BUDGET_COMPONENTS", "match_density", "misregistration_rows", "misregistration_with_true_attitude", "scene_geometry", "uncertainty", "sigma_calibration"]
+__all__ = ["AXES", "RunData", "load_run", "get_integrator", "pair_file_tag", "scenario_summary", "restored_axes", "attitude_table", "headline", "minmax_decimate", "longest_finite_run", "zoom_window", "welch_settings", "spectra", "frozen_chain_gain", "probe_window_gain", "integration_probe", "measured_transfer", "analytic_chain_gain", "analytic_joint_gain", "regularisation_k", "transfer_curves", "integration_record", "line_lags", "true_differentials", "measured_differentials", "axis_integration", "error_budget", "local_errors", "BUDGET_COMPONENTS", "match_density", "misregistration_rows", "misregistration_with_true_attitude", "scene_geometry", "uncertainty", "sigma_calibration"]

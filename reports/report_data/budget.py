@@ -10,13 +10,14 @@ from scipy.interpolate import CubicSpline
 
 from restore.observability import record_trend
 from reports.metrics import YAW_COUPLING_ATTRS, error_stats, unobservable_split, yaw_seen
+from restore.local_noise import local_matching_error
 from restore.observability import record_observability
 from simsat.units import AXES
 
 from .headline import attitude_table, restored_axes
 from .loading import RunData
 
-__all__ = ['integration_record', 'line_lags', 'true_differentials', 'measured_differentials', 'axis_integration', 'error_budget', 'BUDGET_COMPONENTS']
+__all__ = ['integration_record', 'line_lags', 'true_differentials', 'measured_differentials', 'axis_integration', 'error_budget', 'local_errors', 'BUDGET_COMPONENTS']
 
 
 def _truth_interpolant(truth, axis: str):
@@ -162,7 +163,8 @@ def _quad_row(component: str, axis: str, total: dict, part: dict, note: str) -> 
 
 
 BUDGET_COMPONENTS = ("uncorrected knowledge", "unobservable (no pair sees it)", "floor (best linear restoration)",
-                     "matching noise", "model / synthesis", "measurement (noise + model)",
+                     "matching noise", "model / synthesis", "local matching error", "line-common error",
+                     "measurement (noise + model)",
                      "integration", "star-tracker anchoring", "total (restored − true)")
 
 
@@ -191,6 +193,16 @@ def error_budget(run: RunData, *, integrate: Callable | None = None, seed: int =
       noise) − integrate(true) (one seeded draw);
     * **model / synthesis** — the part of the measurement error that matching
       noise does not explain: √(measurement² − noise²), per figure;
+    * **local matching error** — the differentials' error that is each matched
+      point's own, measured without truth by fitting the differentials again
+      from two interleaved halves of the swath
+      (:func:`restore.local_noise.local_matching_error`): integrate(true +
+      local) − integrate(true) (without truth: integrate(measured + local) −
+      integrate(measured));
+    * **line-common error** — the measurement error the local one does not
+      explain, √(measurement² − local²): an error every point of a line shares
+      (a band's bias along the scene's large features), which more points do
+      not reduce and, where it moves like an attitude, no residual shows;
     * **total** — restored − true (the headline).
 
     Every re-run goes through the pipeline's own integration step with the
@@ -220,11 +232,12 @@ def error_budget(run: RunData, *, integrate: Callable | None = None, seed: int =
                 "seconds": 0.0}
     integrate = _budget_cost_guard(run, integrate, max_seconds, notes)
     rng = np.random.default_rng(seed)
+    local = local_errors(run, notes) if integrate is not None else {}
     for a in restored_axes(run):
         ax = _AxisBudget(run, a, integrate is not None, notes)
         noise = ax.noise_draw(rng)
         drows += ax.differential_rows()
-        rows += ax.attitude_rows(noise, series)
+        rows += ax.attitude_rows(noise, series, ax.local_draw(local))
     if integrate is None:
         notes.append("attitude-domain propagation (matching noise, model, integration) needs re-running the "
                      "integration; only the differential-level figures are given")
@@ -232,6 +245,32 @@ def error_budget(run: RunData, *, integrate: Callable | None = None, seed: int =
         notes.append("no truth: only the matching noise can be budgeted")
     return {"rows": rows, "differential_rows": drows, "notes": notes, "series": series,
             "seconds": _time.perf_counter() - t0}
+
+
+def local_errors(run: RunData, notes: list | None = None) -> dict:
+    """``{pair: (lines, 3) array}``: the local part of each pair's differential error
+    (:func:`restore.local_noise.local_matching_error`), from the matches ``restoration.nc`` records and the
+    sensitivities of the product's sensor model (as the pipeline's first synthesis computed them); {} when the
+    file holds no matches."""
+    res = getattr(run, "result", None)
+    if res is None or not res.pairs or run.product is None:
+        return {}
+    s = res.settings
+    sm = run.product.sensor_model()
+    n = int(np.asarray(res.time).size)
+    out = {}
+    for p in res.pairs:
+        v = np.asarray(p.valid, dtype=bool)
+        if p.pred_line_b is None or not v.any():
+            continue
+        g = sm.direct_location(p.ahead, np.asarray(p.line_a)[v], np.asarray(p.col_a)[v])
+        sens = sm.sensitivities(p.behind, g)
+        out[p.name] = local_matching_error(p, sens, n_lines=n, axes=s.axes, block_columns=2 * int(s.window[1]),
+                                           min_points=max(2, s.min_points_per_line // 2), n_sigma=s.n_sigma,
+                                           window_lines=s.window[0] if s.compensate_window else 0)
+    if notes is not None and not out:
+        notes.append("restoration.nc holds no matches: the local matching error is not budgeted")
+    return out
 
 
 def _budget_cost_guard(run: RunData, integrate, max_seconds: float, notes: list):
@@ -298,6 +337,14 @@ class _AxisBudget:
         s_ = np.where(np.isfinite(self.meas) & ~np.isfinite(s_), fill, s_)
         return s_ * rng.standard_normal(s_.shape)
 
+    def local_draw(self, local: dict) -> np.ndarray | None:
+        """The local matching error of this axis's pairs (record's order; 0 on lines a half does not cover)."""
+        if not local or self.rec is None or any(p not in local for p in self.rec.pairs):
+            return None
+        k = AXES.index(self.a)
+        e = np.array([local[p][:, k] for p in self.rec.pairs])
+        return np.where(np.isfinite(self.meas), np.nan_to_num(e), np.nan)
+
     def differential_rows(self) -> list:
         """Per pair: matching σ, measured − true (at the delay the images saw), time sync, model."""
         out = []
@@ -338,8 +385,9 @@ class _AxisBudget:
         row["model_rms_urad"] = float(np.sqrt(max(mm * mm - ms * ms, 0.0))) if np.isfinite(mm) else float("nan")
         return row
 
-    def attitude_rows(self, noise, series: dict) -> list:
-        """The attitude-domain rows of this axis (and its series into ``series``)."""
+    def attitude_rows(self, noise, series: dict, local=None) -> list:
+        """The attitude-domain rows of this axis (and its series into ``series``). Long: one row after the other,
+        with and without truth."""
         a, att, ifov, mask, rec = self.a, self.att, self.ifov, self.mask, self.rec
         rows: list = []
         ser: dict = {}
@@ -358,6 +406,12 @@ class _AxisBudget:
                 rows.append(_stats_row("matching noise", a, en, ifov,
                                        "integrate(measured + σ·noise) − integrate(measured), 1 draw"))
                 ser["matching noise"] = en
+            if rec is not None and local is not None:
+                el = np.where(mask, rec.rerun(self.meas + local) - rec.rerun(), np.nan)
+                rows.append(_stats_row("local matching error", a, el, ifov,
+                                       "integrate(measured + local) − integrate(measured); local: half the "
+                                       "difference of two interleaved halves of the swath"))
+                ser["local matching error"] = el
             return rows
         # perfect differentials as the images saw them (at t + τ + λ), through the same integration
         dperfect = self.dlag if self.dlag is not None else self.dtrue
@@ -385,6 +439,16 @@ class _AxisBudget:
                             "total − integration" + (" − anchoring" if anchored else ""))
         if r_noise is not None:
             rows.append(_quad_row("model / synthesis", a, r_meas, r_noise, "√(measurement² − noise²)"))
+        if local is not None:
+            el = np.where(mask, rec.rerun(dperfect + local) - th_true, np.nan)
+            if anchored:
+                el = el - record_trend(el)
+            r_local = _stats_row("local matching error", a, el, ifov,
+                                 "integrate(true + local) − integrate(true); local: half the difference of two "
+                                 "interleaved halves of the swath")
+            rows.append(r_local)
+            rows.append(_quad_row("line-common error", a, r_meas, r_local, "√(measurement² − local²)"))
+            ser["local matching error"] = el
         rows.append(r_meas)
         rows.append(_stats_row("integration", a, eint, ifov, "integrate(true differentials) − truth"
                                + (", its trend removed (the star-tracker anchoring sets it)" if anchored else "")))

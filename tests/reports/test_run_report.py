@@ -405,6 +405,8 @@ def test_budget_rows_equal_independent_computations(synth):
     b = _csv(run, "budget.csv")
     rest = meta["restoration"]
     t = meta["t"]
+    local = D.local_errors(D.load_run(run))
+    assert set(local) == {f"{x}/{y}" for x, y in PAIRS}
 
     def row(axis, comp):
         i = [k for k in range(len(b["axis"])) if b["axis"][k] == axis and b["component"][k] == comp]
@@ -438,6 +440,16 @@ def test_budget_rows_equal_independent_computations(synth):
         mod = row(a, "model / synthesis")
         meas = row(a, "measurement (noise + model)")
         assert mod["rms_urad"] == pytest.approx(np.sqrt(max(meas["rms_urad"] ** 2 - n["rms_urad"] ** 2, 0)), rel=1e-9)
+        # local matching error: the two interleaved halves' half-difference, integrated on top of the truth
+        k = D.AXES.index(a)
+        loc = np.array([local[f"{x}/{y}"][:, k] for x, y in PAIRS])
+        loc = np.where(np.isfinite(meta[f"dmeas_{a}"]), np.nan_to_num(loc), np.nan)
+        el = np.where(m, wiener_integrate(list(dtrue + loc), meta["taus"], TE)
+                      - wiener_integrate(list(dtrue), meta["taus"], TE), np.nan)
+        r_loc = row(a, "local matching error")
+        assert r_loc["rms_urad"] == pytest.approx(_stats(el)[0] * 1e6, rel=5e-3)
+        assert row(a, "line-common error")["rms_urad"] == pytest.approx(
+            np.sqrt(max(meas["rms_urad"] ** 2 - r_loc["rms_urad"] ** 2, 0)), rel=1e-9)
     d = _csv(run, "budget_differentials.csv")
     for k in range(len(d["pair"])):
         j = [f"{a}/{b}" for a, b in PAIRS].index(d["pair"][k])
@@ -488,7 +500,7 @@ def test_report_without_truth(tmp_path, monkeypatch):
     att = _csv(run, "attitude.csv")
     assert "error_roll_urad" not in att and "restored_roll_urad" in att
     b = _csv(run, "budget.csv")
-    assert set(b["component"]) == {"matching noise"}
+    assert set(b["component"]) == {"matching noise", "local matching error"}
     spec = _csv(run, "spectra.csv")
     assert "psd_correction_pitch_urad2_per_hz" in spec and "psd_error_pitch_urad2_per_hz" not in spec
     rep = json.loads((out / "report.json").read_text())
