@@ -247,7 +247,7 @@ def draw_budget(ax, rows: list, *, unit: str = "px"):
     axes = [a for a in AXES if any(r["axis"] == a for r in rows)]
     colors = {"uncorrected knowledge": C_KNOW, "unobservable (no pair sees it)": "#444444",
               "floor (best linear restoration)": "#0072B2", "matching noise": "#56B4E9",
-              "model / synthesis": "#CC79A7", "local matching error": "#F0E442", "line-common error": "#D55E00",
+              "model / synthesis": "#CC79A7", "local matching error": "#F0E442", "line-common error": "#882255",
               "integration": "#009E73", "star-tracker anchoring": "#999999",
               "total (restored − true)": C_ERR}
     h = 0.8 / max(1, len(comps))
