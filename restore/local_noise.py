@@ -51,13 +51,14 @@ def interleaved_halves(columns, block_columns: int) -> np.ndarray:
     return (np.floor(c / block_columns).astype(np.int64) % 2) == 0
 
 
-def _halves_balanced(columns: np.ndarray, block_columns: int) -> np.ndarray:
-    """:func:`interleaved_halves`, with the block width lowered (down to one window) until both halves hold points."""
+def _halves_balanced(columns: np.ndarray, block_columns: int) -> np.ndarray | None:
+    """:func:`interleaved_halves`, with the block width lowered (to a quarter) until both halves hold points;
+    None when they never do (all points in one block)."""
     for b in (block_columns, block_columns // 2, block_columns // 4):
         half = interleaved_halves(columns, max(int(b), 1))
         if half.any() and (~half).any():
             return half
-    return interleaved_halves(columns, max(int(block_columns // 4), 1))
+    return None
 
 
 def local_matching_error(pair, sensitivities, *, n_lines: int, axes=AXES, block_columns: int, min_points: int = 2,
@@ -89,7 +90,8 @@ def local_matching_error(pair, sensitivities, *, n_lines: int, axes=AXES, block_
     ndarray (n_lines, 3)
         Per line and axis of :data:`simsat.units.AXES` [rad]: an estimate of the
         local part of the differential's error; NaN where a half has too few
-        points or the axis is not fitted.
+        points or the axis is not fitted (everywhere when every point lies in
+        one block).
     """
     v = np.asarray(pair.valid, dtype=bool)
     sens = np.asarray(sensitivities, dtype=np.float64)
@@ -104,6 +106,8 @@ def local_matching_error(pair, sensitivities, *, n_lines: int, axes=AXES, block_
     else:
         w = np.clip(np.asarray(pair.quality)[v], 0.05, 1.0) ** 2
     half = _halves_balanced(ca, block_columns)
+    if half is None:
+        return np.full((n_lines, len(AXES)), np.nan)
     fits = []
     for m in (half, ~half):
         res = instant_synthesis(np.rint(la[m]).astype(np.int64), rl[m], rc[m], sens[m], n_lines=n_lines,

@@ -74,3 +74,11 @@ def test_lines_a_half_does_not_cover_are_gaps_and_the_sensitivities_must_match()
     assert np.all(np.isnan(local[:10, :2]))
     with pytest.raises(ValueError, match="sensitivities"):
         local_matching_error(pair, sens, n_lines=N_LINES, axes=("roll", "pitch"), block_columns=62)
+
+
+def test_points_all_in_one_block_give_no_estimate():
+    rng = np.random.default_rng(8)
+    pair, sens = _pair(np.zeros(N_LINES), np.zeros(N_LINES), 0.2, rng)
+    pair.valid &= pair.col_a == COLS[0]
+    local = local_matching_error(pair, sens[pair.valid], n_lines=N_LINES, axes=("roll", "pitch"), block_columns=62)
+    assert np.all(np.isnan(local))
