@@ -51,10 +51,19 @@ pair's noise that is a shared band's is measured from the real residuals
 
 Below the high-pass, the AOCS knowledge's own noise (recorded in the product)
 adds ``σ_k² · 2 f_hp / f_k`` (white noise at the knowledge rate ``f_k``).
+
+A second prediction needs no model of the noise: the local part of the
+matching error is measured by fitting the differentials again from two
+interleaved halves of the swath (:mod:`restore.local_noise`), and that series,
+with random phases common to the pairs (its spectra and cross-spectra kept),
+is the noise of the draws (:func:`local_error_sigma`). It holds what moves
+like an attitude, which the residual cannot show, but not an error every
+point of a line shares, which the residual partly shows: the pipeline keeps,
+line by line, the larger of the two (:func:`larger_sigma`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.fft import irfft, next_fast_len, rfft
@@ -67,7 +76,7 @@ __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", 
            "fit_residual_rms", "fit_residuals", "band_power", "noise_colour_from_check", "noise_colour_estimate",
            "coloured_noise",
            "knowledge_noise_below", "pair_bands", "SharedBandNoise", "shared_band_noise", "correlated_noise",
-           "detrended", "detrended_rms", "detrended_rms_over"]
+           "detrended", "detrended_rms", "detrended_rms_over", "local_error_sigma", "larger_sigma"]
 
 
 #: the real fit residual may exceed the simulated one by this factor before the noise is inflated
@@ -113,6 +122,9 @@ class PosteriorSigma:
     #: the ratio of real to simulated fit-residual power the draws use (:func:`noise_colour_estimate`), per pair
     #: and frequency of ``rfftfreq(lines, Δt)``; None without the check
     colour_estimate: np.ndarray | None = None
+    #: the predicted RMS without the record's trend with the measured local matching error as the noise
+    #: (:func:`local_error_sigma`) when it was computed and kept where larger (:func:`larger_sigma`); NaN otherwise
+    local_detrended_rms: float = float("nan")
 
 
 def detrended(errors: np.ndarray) -> np.ndarray:
@@ -558,21 +570,10 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     def run(colour, k: int, check: bool, shared=None):
         errs, resid = [], []
         for _ in range(k):
-            if record.highpass_hz > 0:
-                th, ref = prior_draw(freq, psd, ext, dt, rng, highpass_hz=record.highpass_hz)
-                ref = ref[:n]
-            else:
-                th = prior_draw(freq, psd, ext, dt, rng)
-                ref = th[:n]
+            th, ref = _prior_and_reference(record, freq, psd, ext, rng)
             ds = simulated_differentials(th, taus, lags, valid, dt) + correlated_noise(noise, colour, shared, dt, rng)
             est = record.rerun(ds, first_stage_gcv=False)
-            e = est - ref
-            if knowledge_noise_rad > 0 and knowledge_rate_hz:
-                e = e + knowledge_noise_below(n, dt, record.highpass_hz, knowledge_noise_rad, knowledge_rate_hz, rng)
-            ok = np.isfinite(e)
-            if ok.any():
-                e = e - np.mean(e[ok])
-            errs.append(e)
+            errs.append(_draw_error(record, est, ref, rng, knowledge_noise_rad, knowledge_rate_hz))
             if check:
                 resid.append(band_power(fit_residuals(ds, est, taus, lags, dt, highpass_hz=record.highpass_hz),
                                         edges))
@@ -599,6 +600,89 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
                           detrended_sigma=np.sqrt(_line_variance(detrended(errs), smooth_lines)),
                           band_shares=shared.band_shares() if shared is not None else {},
                           colour_estimate=estimate)
+
+
+def _prior_and_reference(record, freq, psd, ext: int, rng) -> tuple:
+    """One attitude drawn from the record's prior over ``ext`` lines, and what the images are meant to supply of
+    it on the record's lines (its high-pass, or itself)."""
+    n, dt = np.asarray(record.diffs).shape[1], float(record.line_period_s)
+    if record.highpass_hz > 0:
+        th, ref = prior_draw(freq, psd, ext, dt, rng, highpass_hz=record.highpass_hz)
+        return th, ref[:n]
+    th = prior_draw(freq, psd, ext, dt, rng)
+    return th, th[:n]
+
+
+def _draw_error(record, est: np.ndarray, ref: np.ndarray, rng, knowledge_noise_rad: float,
+                knowledge_rate_hz: float | None) -> np.ndarray:
+    """A draw's error: estimate − reference, plus the knowledge noise below the high-pass, mean removed."""
+    e = est - ref
+    if knowledge_noise_rad > 0 and knowledge_rate_hz:
+        e = e + knowledge_noise_below(e.size, float(record.line_period_s), record.highpass_hz, knowledge_noise_rad,
+                                      knowledge_rate_hz, rng)
+    ok = np.isfinite(e)
+    return e - np.mean(e[ok]) if ok.any() else e
+
+
+def local_error_sigma(record, local: np.ndarray, *, samples: int = 8, seed: int = 0, smooth_lines: int = 31,
+                      knowledge_noise_rad: float = 0.0, knowledge_rate_hz: float | None = None) -> PosteriorSigma:
+    """Predicted 1-σ per line with the *measured* local matching error as the pairs' noise.
+
+    ``local`` (pair, line) [rad] is the local part of each pair's
+    differential error, measured from two interleaved halves of the swath
+    (:func:`restore.local_noise.local_matching_error`; NaN: not measured,
+    taken as 0 on the record's lines). The draws add to the differentials of
+    an attitude drawn from the prior this series with random phases, the
+    same for every pair (a surrogate: each pair's spectrum and the pairs'
+    cross-spectra are the measured ones, the noise colour and the bands the
+    pairs share included), and integrate them through the frozen filter, as
+    :func:`posterior_sigma` does with its model.
+
+    The two predictions miss different things: the residual's model does not
+    see an error that moves like an attitude, the local one does not hold an
+    error every point of a line shares. :func:`larger_sigma` keeps the larger.
+    """
+    if samples < 2:
+        raise ValueError(f"samples: must be >= 2, got {samples}")
+    d = np.asarray(record.diffs, dtype=np.float64)
+    valid = np.isfinite(d)
+    loc = np.asarray(local, dtype=np.float64)
+    if loc.shape != d.shape:
+        raise ValueError(f"local: shape {loc.shape}, expected the record's (pair, line) {d.shape}")
+    n, dt = d.shape[1], float(record.line_period_s)
+    taus = [float(t) for t in record.taus]
+    lags = [np.nan_to_num(np.asarray(lg, dtype=np.float64)) for lg in record.lags_s]
+    freq, psd = _prior(record)
+    ext = n + int(np.ceil((max(taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
+    x = np.where(valid, np.nan_to_num(loc), 0.0)
+    spec = rfft(x - x.mean(axis=1, keepdims=True), axis=-1)
+    rng = np.random.default_rng(seed)
+    errs = []
+    for _ in range(samples):
+        th, ref = _prior_and_reference(record, freq, psd, ext, rng)
+        phase = np.exp(2j * np.pi * rng.random(n // 2 + 1))
+        phase[0] = 0.0
+        noise = np.where(valid, irfft(spec * phase, n=n, axis=-1), np.nan)
+        est = record.rerun(simulated_differentials(th, taus, lags, valid, dt) + noise, first_stage_gcv=False)
+        errs.append(_draw_error(record, est, ref, rng, knowledge_noise_rad, knowledge_rate_hz))
+    errs = np.array(errs)
+    return PosteriorSigma(sigma=np.sqrt(_line_variance(errs, smooth_lines)), noise_scale=1.0, samples=int(samples),
+                          detrended_rms=detrended_rms(errs),
+                          detrended_sigma=np.sqrt(_line_variance(detrended(errs), smooth_lines)))
+
+
+def larger_sigma(model: PosteriorSigma, local: PosteriorSigma) -> PosteriorSigma:
+    """``model`` with its σ per line (and its σ without the record's trend) raised to ``local``'s where that is
+    larger; what the model's noise check found (colour, shares, scale) is kept. ``local_detrended_rms`` records
+    the local prediction."""
+    def up(a, b):
+        if a is None or b is None:
+            return a
+        return np.where(np.isfinite(a) & np.isfinite(b), np.maximum(a, b), a)
+    return replace(model, sigma=up(model.sigma, local.sigma),
+                   detrended_sigma=up(model.detrended_sigma, local.detrended_sigma),
+                   detrended_rms=float(np.nanmax([model.detrended_rms, local.detrended_rms])),
+                   local_detrended_rms=float(local.detrended_rms))
 
 
 def _line_variance(errs: np.ndarray, smooth_lines: int) -> np.ndarray:

@@ -48,6 +48,7 @@ class RestorationSettings:
     min_coverage: float = 0.05
     posterior_samples: int = 8
     noise_colour_weighting: bool = True
+    sigma_local_error: bool = True
     knowledge_prior: bool = True
     rematch: int | str = "auto"
     rematch_search: tuple = (2, 2)
@@ -154,6 +155,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.posterior_samples = sec.integer("posterior_samples", s.posterior_samples, ge=0, le=1000)
     if s.posterior_samples == 1:
         raise sec.error("posterior_samples", "must be 0 (no predicted σ) or >= 2 Monte Carlo draws, got 1")
+    s.sigma_local_error = sec.boolean("sigma_local_error", s.sigma_local_error)
     s.max_sigma_px = sec.number_or("max_sigma_px", "auto", gt=0)
     sec.finish()
     return s

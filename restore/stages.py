@@ -26,7 +26,8 @@ from .method_choice import predicted_differential, resolve_method
 from .observability import observability
 from .knowledge_prior import knowledge_psd_ceiling
 from .line_weights import gap_distance, residual_weight_factors, window_stretch
-from .posterior import fit_residuals, posterior_sigma
+from .local_noise import local_matching_error
+from .posterior import fit_residuals, larger_sigma, local_error_sigma, posterior_sigma
 from .rematch import rematch_pair
 from .result import IntegrationRecord, PairData
 from .selection import estimate_image_noise, expected_matching_std, select_points_in_blocks
@@ -42,7 +43,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "predicted_sigma", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "predicted_sigma", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -792,21 +793,50 @@ def colour_weighted(record: IntegrationRecord, colour, ceiling=None) -> Integrat
     return replace(weighted, increment=weighted.rerun())
 
 
-def predicted_sigma(records: dict, product: Product, settings: RestorationSettings) -> dict:
+def predicted_sigma(records: dict, product: Product, settings: RestorationSettings, pairs: list | None = None) -> dict:
     """Predicted 1-σ per line of each restored axis [rad] (:func:`restore.posterior.posterior_sigma`).
 
     The AOCS knowledge's noise, as the product records it, counts below the
-    high-pass. Returns ``{axis: PosteriorSigma}`` for the axes of
-    ``records``, each with its own seed whichever others are given; empty with
-    ``posterior_samples = 0``.
+    high-pass. With ``pairs`` (as last synthesised) and ``sigma_local_error``,
+    the prediction with the measured local matching error
+    (:func:`local_errors`, :func:`restore.posterior.local_error_sigma`) raises
+    it where larger (:func:`restore.posterior.larger_sigma`). Returns ``{axis:
+    PosteriorSigma}`` for the axes of ``records``, each with its own seed
+    whichever others are given; empty with ``posterior_samples = 0``.
     """
     if settings.posterior_samples < 2:
         return {}
     noise, rate = product.knowledge_noise or (0.0, None)
     order = sorted(set(settings.axes) | set(records))
-    return {a: posterior_sigma(rec, samples=settings.posterior_samples, seed=order.index(a),
-                               knowledge_noise_rad=noise, knowledge_rate_hz=rate)
-            for a, rec in sorted(records.items())}
+    out = {a: posterior_sigma(rec, samples=settings.posterior_samples, seed=order.index(a),
+                              knowledge_noise_rad=noise, knowledge_rate_hz=rate)
+           for a, rec in sorted(records.items())}
+    local = local_errors(pairs, settings, product.time.size) if pairs and settings.sigma_local_error else {}
+    for a, rec in sorted(records.items()):
+        if not local or any(p not in local for p in rec.pairs):
+            continue
+        k = AXES.index(a)
+        measured = np.array([local[p][:, k] for p in rec.pairs])
+        out[a] = larger_sigma(out[a], local_error_sigma(rec, measured, samples=settings.posterior_samples,
+                                                        seed=order.index(a), knowledge_noise_rad=noise,
+                                                        knowledge_rate_hz=rate))
+    return out
+
+
+def local_errors(pairs: list, settings: RestorationSettings, n_lines: int) -> dict:
+    """``{pair: (lines, 3)}``: the local part of each synthesised pair's differential error
+    (:func:`restore.local_noise.local_matching_error`, blocks of two matching windows' width); a pair without
+    its synthesis (sensitivities, predictions, of its current matches) is left out."""
+    out = {}
+    for p in pairs:
+        if p.sens is None or p.pred_line_b is None or np.shape(p.sens)[0] != int(np.count_nonzero(p.valid)):
+            continue
+        out[p.name] = local_matching_error(p, p.sens, n_lines=n_lines, axes=settings.axes,
+                                           block_columns=2 * int(settings.window[1]),
+                                           min_points=max(2, settings.min_points_per_line // 2),
+                                           n_sigma=settings.n_sigma,
+                                           window_lines=settings.window[0] if settings.compensate_window else 0)
+    return out
 
 
 #: "auto" ``max_sigma_px``: a line is flagged when its predicted σ exceeds this many times the axis's median

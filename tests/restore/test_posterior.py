@@ -304,3 +304,71 @@ def test_the_colour_estimate_is_unbiased_where_the_check_drops_a_modest_excess()
     # the modest excess: estimated at its level on average, where the test mostly sees nothing
     np.testing.assert_allclose(excess[:, 1:4].mean(axis=0), 3.0, rtol=0.15)
     assert np.mean(tested[:, 1:4] > 1.0) < 0.3
+
+
+def _band_noise(rng, level):
+    """Noise of the pairs a/b, b/c, a/c made of each band's own error, entering every pair that sees the band
+    (behind: at the pair's delay, +; ahead: −), plus a small independent part: the pairs' noises correlate."""
+    m = N + 80
+    e = {b: level * rng.standard_normal(m) for b in "abc"}
+    idx = np.arange(N)
+    out = []
+    for (x, y), tau in zip([("a", "b"), ("b", "c"), ("a", "c")], TAUS):
+        k = int(round(tau / DT))
+        out.append(e[y][idx + k] - e[x][idx] + 0.2 * level * rng.standard_normal(N))
+    return np.array(out)
+
+
+def _record_with_noise(seed, noise_fn, level=0.25e-6):
+    rec, th = _record(seed=seed, noise=level * np.sqrt(2.04))
+    rng = np.random.default_rng(1000 + seed)
+    d = simulated_differentials(th, TAUS, np.zeros((3, N)), np.ones((3, N), bool), DT)
+    n = noise_fn(rng, level)
+    rec.diffs = d + n
+    rec.increment = rec.rerun()
+    return rec, th, n
+
+
+def test_local_error_sigma_of_white_independent_noise_is_the_models():
+    """Given the record's own white noise as the measured local error, the surrogate predicts what the white
+    model with that level predicts (mid-record, within the draws' scatter)."""
+    from restore.posterior import local_error_sigma
+    rec, th = _record(seed=2)
+    noise = rec.diffs - simulated_differentials(th, TAUS, np.zeros((3, N)), np.ones((3, N), bool), DT)
+    loc = local_error_sigma(rec, noise, samples=32, seed=4)
+    model = posterior_sigma(rec, samples=32, seed=4, check_noise=False)
+    mid = slice(N // 4, 3 * N // 4)
+    assert np.sqrt(np.mean(loc.sigma[mid] ** 2)) == pytest.approx(np.sqrt(np.mean(model.sigma[mid] ** 2)), rel=0.1)
+    with pytest.raises(ValueError, match="shape"):
+        local_error_sigma(rec, noise[:2], samples=4)
+
+
+def test_local_error_sigma_of_band_shared_noise_is_the_spread_of_actual_errors():
+    """When the pairs share their bands' errors, the surrogate of one record's noise (its cross-spectra kept)
+    predicts the RMS error over independent records of that noise; the independent white model of the same
+    per-pair level falls short."""
+    from restore.posterior import local_error_sigma
+    rec, _, n = _record_with_noise(3, _band_noise)
+    loc = local_error_sigma(rec, n, samples=24, seed=5)
+    errs = []
+    for s in range(12):
+        r, th, _ = _record_with_noise(200 + s, _band_noise)
+        e = r.increment - th[:N]
+        errs.append(e - np.mean(e))
+    actual = np.sqrt(np.mean(np.array(errs) ** 2))
+    assert actual == pytest.approx(np.sqrt(np.nanmean(loc.sigma ** 2)), rel=0.15)
+    white = posterior_sigma(rec, samples=24, seed=5, check_noise=False)
+    assert np.sqrt(np.nanmean(white.sigma ** 2)) < 0.9 * actual      # 0.84 × measured
+
+
+def test_larger_sigma_takes_the_larger_per_line_and_keeps_the_models_check():
+    from restore.posterior import PosteriorSigma, larger_sigma
+    colour = np.ones((3, 5))
+    a = PosteriorSigma(sigma=np.array([1.0, 2.0, np.nan, 4.0]), noise_scale=1.3, samples=8, noise_colour=colour,
+                       detrended_rms=2.0, detrended_sigma=np.array([1.0, 1.0, np.nan, 1.0]), band_shares={"b": 0.2})
+    b = PosteriorSigma(sigma=np.array([3.0, 1.0, 5.0, np.nan]), noise_scale=1.0, samples=8, detrended_rms=2.5,
+                       detrended_sigma=np.array([0.5, 2.0, 1.0, 1.0]))
+    c = larger_sigma(a, b)
+    assert c.sigma.tolist()[:2] == [3.0, 2.0] and np.isnan(c.sigma[2]) and c.sigma[3] == 4.0
+    assert c.detrended_sigma.tolist()[:2] == [1.0, 2.0] and c.detrended_rms == 2.5 and c.local_detrended_rms == 2.5
+    assert c.noise_colour is colour and c.noise_scale == 1.3 and c.band_shares == {"b": 0.2}

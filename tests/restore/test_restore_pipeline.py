@@ -409,6 +409,36 @@ def test_noise_colour_weighting_integrates_again_and_the_file_keeps_the_colour(t
     assert all(rec.spectrum.noise_colour is None for rec in bare.integration.values())
 
 
+def test_the_local_matching_error_raises_the_predicted_sigma_where_larger(tiny_restored, tmp_path):
+    """restoration.sigma_local_error (on by default): σ per line is the larger of the residual-calibrated
+    prediction (the same with it off: same seeds) and the one with the local matching error measured from
+    the pipeline's own pairs (two interleaved halves of the swath), computed here again."""
+    from restore import stages
+    from restore.posterior import local_error_sigma
+    from simsat.product import read_product
+
+    d, on = tiny_restored
+    run = tmp_path / "tiny"
+    shutil.copytree(d, run)
+    off = restore_run(run, progress=False, overrides={"sigma_local_error": False, "correct_images": False})
+    noise, rate = read_product(run).knowledge_noise or (0.0, None)
+    local = stages.local_errors(on.pairs, on.settings, on.time.size)
+    assert set(local) == {p.name for p in on.pairs}
+    order = sorted(set(on.settings.axes) | set(on.integration))
+    for a, s_on in on.sigma.items():
+        rec = on.integration[a]
+        k = ["roll", "pitch", "yaw"].index(a)
+        ps = local_error_sigma(rec, np.array([local[p][:, k] for p in rec.pairs]),
+                               samples=on.settings.posterior_samples, seed=order.index(a),
+                               knowledge_noise_rad=noise, knowledge_rate_hz=rate)
+        assert np.isfinite(ps.sigma).sum() > 0.9 * np.isfinite(s_on).sum()
+        both = np.isfinite(s_on) & np.isfinite(off.sigma[a]) & np.isfinite(ps.sigma)
+        assert both.sum() > 0.9 * np.isfinite(s_on).sum()
+        np.testing.assert_allclose(s_on[both], np.maximum(off.sigma[a], ps.sigma)[both], rtol=1e-12)
+    with pytest.raises(ScenarioError, match="sigma_local_error"):
+        restoration_settings({"sigma_local_error": "yes"})
+
+
 def test_posterior_samples_zero_writes_no_sigma_and_one_is_refused(tiny_restored, tmp_path):
     with pytest.raises(ScenarioError, match="posterior_samples"):
         restoration_settings({"posterior_samples": 1})
