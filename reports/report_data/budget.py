@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import time as _time
+from dataclasses import replace
 from typing import Callable
 
 import numpy as np
@@ -10,7 +11,7 @@ from scipy.interpolate import CubicSpline
 
 from restore.observability import record_trend
 from reports.metrics import YAW_COUPLING_ATTRS, error_stats, unobservable_split, yaw_seen
-from restore.local_noise import local_matching_error
+from restore.stages import local_errors as stages_local_errors
 from restore.observability import record_observability
 from simsat.units import AXES
 
@@ -249,25 +250,21 @@ def error_budget(run: RunData, *, integrate: Callable | None = None, seed: int =
 
 def local_errors(run: RunData, notes: list | None = None) -> dict:
     """``{pair: (lines, 3) array}``: the local part of each pair's differential error
-    (:func:`restore.local_noise.local_matching_error`), from the matches ``restoration.nc`` records and the
-    sensitivities of the product's sensor model (as the pipeline's first synthesis computed them); {} when the
-    file holds no matches."""
+    (:func:`restore.stages.local_errors`), from the matches ``restoration.nc`` records and the sensitivities of
+    the product's sensor model (as the pipeline's first synthesis computed them); {} when the file holds no
+    matches."""
     res = getattr(run, "result", None)
     if res is None or not res.pairs or run.product is None:
         return {}
-    s = res.settings
     sm = run.product.sensor_model()
-    n = int(np.asarray(res.time).size)
-    out = {}
+    pairs = []
     for p in res.pairs:
         v = np.asarray(p.valid, dtype=bool)
         if p.pred_line_b is None or not v.any():
             continue
         g = sm.direct_location(p.ahead, np.asarray(p.line_a)[v], np.asarray(p.col_a)[v])
-        sens = sm.sensitivities(p.behind, g)
-        out[p.name] = local_matching_error(p, sens, n_lines=n, axes=s.axes, block_columns=2 * int(s.window[1]),
-                                           min_points=max(2, s.min_points_per_line // 2), n_sigma=s.n_sigma,
-                                           window_lines=s.window[0] if s.compensate_window else 0)
+        pairs.append(replace(p, sens=sm.sensitivities(p.behind, g)))
+    out = stages_local_errors(pairs, res.settings, int(np.asarray(res.time).size))
     if notes is not None and not out:
         notes.append("restoration.nc holds no matches: the local matching error is not budgeted")
     return out
