@@ -125,6 +125,8 @@ class PosteriorSigma:
     #: the predicted RMS without the record's trend with the measured local matching error as the noise
     #: (:func:`local_error_sigma`) when it was computed and kept where larger (:func:`larger_sigma`); NaN otherwise
     local_detrended_rms: float = float("nan")
+    #: the model's σ per line before :func:`larger_sigma` raised it (None when not raised)
+    model_sigma: np.ndarray | None = None
 
 
 def detrended(errors: np.ndarray) -> np.ndarray:
@@ -674,7 +676,7 @@ def local_error_sigma(record, local: np.ndarray, *, samples: int = 8, seed: int 
 def larger_sigma(model: PosteriorSigma, local: PosteriorSigma) -> PosteriorSigma:
     """``model`` with its σ per line (and its σ without the record's trend) raised to ``local``'s where that is
     larger; what the model's noise check found (colour, shares, scale) is kept. ``local_detrended_rms`` records
-    the local prediction."""
+    the local prediction, ``model_sigma`` the model's σ per line."""
     def up(a, b):
         if a is None or b is None:
             return a
@@ -682,7 +684,7 @@ def larger_sigma(model: PosteriorSigma, local: PosteriorSigma) -> PosteriorSigma
     return replace(model, sigma=up(model.sigma, local.sigma),
                    detrended_sigma=up(model.detrended_sigma, local.detrended_sigma),
                    detrended_rms=float(np.nanmax([model.detrended_rms, local.detrended_rms])),
-                   local_detrended_rms=float(local.detrended_rms))
+                   local_detrended_rms=float(local.detrended_rms), model_sigma=model.sigma)
 
 
 def _line_variance(errs: np.ndarray, smooth_lines: int) -> np.ndarray:

@@ -855,13 +855,20 @@ def flag_uncertain(correction: dict, sigma: dict, setting, pixel_ifov_rad: float
     """Lines whose predicted σ exceeds the limit (:func:`sigma_limit`) are not restored (NaN), and flagged.
 
     Short clear islands between clouds and the lines at a gap's edge are
-    where σ rises: they are reported as flagged, not silently valid. Returns
-    ``(correction, flagged)`` with ``flagged[axis]`` a boolean per line.
+    where σ rises: they are reported as flagged, not silently valid. With
+    "auto" (3 × the median σ) a σ raised by the local matching error
+    (:func:`restore.posterior.larger_sigma`) is judged by the model's σ: the
+    surrogate's random phases spread the local error over the whole record,
+    so it sets the level, not where σ rises. Returns ``(correction,
+    flagged)`` with ``flagged[axis]`` a boolean per line.
     """
     out, flagged = dict(correction), {}
     for a, ps in sigma.items():
-        limit = sigma_limit(ps.sigma, setting, pixel_ifov_rad)
-        f = np.isfinite(out[a]) & ~(ps.sigma <= limit)
+        # "auto" looks for lines where σ rises above the axis's own level: the shape of the model's σ, which knows
+        # the per-line weights, gaps and ends (the local error's draws spread its series over the record)
+        sig = ps.model_sigma if setting == "auto" and ps.model_sigma is not None else ps.sigma
+        limit = sigma_limit(sig, setting, pixel_ifov_rad)
+        f = np.isfinite(out[a]) & ~(sig <= limit)
         out[a] = np.where(f, np.nan, out[a])
         flagged[a] = f
     return out, flagged

@@ -372,3 +372,19 @@ def test_larger_sigma_takes_the_larger_per_line_and_keeps_the_models_check():
     assert c.sigma.tolist()[:2] == [3.0, 2.0] and np.isnan(c.sigma[2]) and c.sigma[3] == 4.0
     assert c.detrended_sigma.tolist()[:2] == [1.0, 2.0] and c.detrended_rms == 2.5 and c.local_detrended_rms == 2.5
     assert c.noise_colour is colour and c.noise_scale == 1.3 and c.band_shares == {"b": 0.2}
+    assert c.model_sigma is a.sigma
+
+
+def test_auto_flags_follow_the_models_sigma_when_the_local_error_raised_it():
+    """"auto" flags where the model's σ rises above 3 × its median; a raised, flat σ does not hide those lines.
+    A limit in pixels judges the σ reported."""
+    from restore.posterior import PosteriorSigma, larger_sigma
+    model_s = np.full(100, 1.0)
+    model_s[:5] = 4.0                                   # a record end where the model's σ rises
+    model = PosteriorSigma(sigma=model_s, noise_scale=1.0, samples=8)
+    local = PosteriorSigma(sigma=np.full(100, 2.0), noise_scale=1.0, samples=8)
+    both = larger_sigma(model, local)                   # 4 at the end, 2 elsewhere: under 3 × its median
+    _, flagged = flag_uncertain({"roll": np.zeros(100)}, {"roll": both}, "auto", 1.0)
+    assert flagged["roll"][:5].all() and not flagged["roll"][5:].any()
+    _, flagged = flag_uncertain({"roll": np.zeros(100)}, {"roll": both}, 1.5, 1.0)
+    assert flagged["roll"].all()
