@@ -683,7 +683,8 @@ def larger_sigma(model: PosteriorSigma, local: PosteriorSigma) -> PosteriorSigma
         return np.where(np.isfinite(a) & np.isfinite(b), np.maximum(a, b), a)
     return replace(model, sigma=up(model.sigma, local.sigma),
                    detrended_sigma=up(model.detrended_sigma, local.detrended_sigma),
-                   detrended_rms=float(np.nanmax([model.detrended_rms, local.detrended_rms])),
+                   detrended_rms=max((v for v in (model.detrended_rms, local.detrended_rms) if np.isfinite(v)),
+                                     default=float("nan")),
                    local_detrended_rms=float(local.detrended_rms), model_sigma=model.sigma)
 
 

@@ -91,13 +91,18 @@ class Restorer:
             pairs, records, estimate = self.rematch(product, pairs, knowledge, records, estimate, timings, bar)
             bar.note("predicted σ (Monte Carlo through the integration)")
             t = _time.perf_counter()
-            sigma = stages.predicted_sigma(records, product, s, pairs)
+            sigma = stages.predicted_sigma(records, product, s)
             timings["posterior_s"] = _time.perf_counter() - t
             pairs, records, estimate, sigma = self.lower_highpass(product, pairs, knowledge, records, estimate,
                                                                    sigma, timings, bar)
             records, estimate, sigma = self.weigh_noise_colour(product, knowledge, records, estimate, sigma, timings,
-                                                                bar, pairs)
+                                                                bar)
             s = self.settings
+            t = _time.perf_counter()
+            if s.sigma_local_error and sigma:
+                bar.note("predicted σ with the local matching error (two interleaved halves of the swath)")
+            sigma = stages.raise_by_local_error(sigma, records, pairs, product, s)
+            timings["local_error_sigma_s"] = _time.perf_counter() - t
             estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad)
             correction = stages.remove_mean(estimate, s.axes)
             restored = {a: knowledge[a] + correction[a] for a in AXES}
@@ -250,7 +255,7 @@ class Restorer:
         return recs, {a: r.increment for a, r in recs.items()}
 
     def weigh_noise_colour(self, product: Product, knowledge: dict, records: dict, estimate: dict, sigma: dict,
-                           timings: dict, bar, pairs: list | None = None) -> tuple:
+                           timings: dict, bar) -> tuple:
         """With ``noise_colour_weighting``: integrate each axis again weighing the pairs' residuals by the noise
         colour its predicted σ's check measured, where the AOCS knowledge proves the excess is noise
         (:func:`stages.colour_weighted` with the knowledge's ceiling), then predict σ of those axes again.
@@ -282,7 +287,7 @@ class Restorer:
             # checked again through the new filter: the weighted fit follows the data less where the colour
             # is, and its residual shows more of the noise there (reusing the first check's noise model
             # predicted σ lower: low_frequencies' pitch × 1.67 → 1.73, geo_noisy_knowledge's × 1.52 → 1.59)
-            sigma = {**sigma, **stages.predicted_sigma(weighted, product, s, pairs)}
+            sigma = {**sigma, **stages.predicted_sigma(weighted, product, s)}
         timings["colour_weighting_s"] = _time.perf_counter() - t
         return records, estimate, sigma
 
@@ -304,7 +309,7 @@ class Restorer:
         t = _time.perf_counter()
         self.settings = s = replace(s, highpass_hz=fx)
         pairs, records, estimate = self.synthesise_and_integrate(product, pairs, knowledge, {}, bar)
-        sigma = stages.predicted_sigma(records, product, s, pairs)
+        sigma = stages.predicted_sigma(records, product, s)
         timings["highpass_lowered_hz"] = fx
         timings["highpass_lowering_s"] = _time.perf_counter() - t
         return pairs, records, estimate, sigma

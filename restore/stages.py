@@ -43,7 +43,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "predicted_sigma", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "predicted_sigma", "raise_by_local_error", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -793,33 +793,44 @@ def colour_weighted(record: IntegrationRecord, colour, ceiling=None) -> Integrat
     return replace(weighted, increment=weighted.rerun())
 
 
-def predicted_sigma(records: dict, product: Product, settings: RestorationSettings, pairs: list | None = None) -> dict:
+def predicted_sigma(records: dict, product: Product, settings: RestorationSettings) -> dict:
     """Predicted 1-σ per line of each restored axis [rad] (:func:`restore.posterior.posterior_sigma`).
 
     The AOCS knowledge's noise, as the product records it, counts below the
-    high-pass. With ``pairs`` (as last synthesised) and ``sigma_local_error``,
-    the prediction with the measured local matching error
-    (:func:`local_errors`, :func:`restore.posterior.local_error_sigma`) raises
-    it where larger (:func:`restore.posterior.larger_sigma`). Returns ``{axis:
-    PosteriorSigma}`` for the axes of ``records``, each with its own seed
-    whichever others are given; empty with ``posterior_samples = 0``.
+    high-pass. Returns ``{axis: PosteriorSigma}`` for the axes of
+    ``records``, each with its own seed whichever others are given; empty with
+    ``posterior_samples = 0``. :func:`raise_by_local_error` completes it.
     """
     if settings.posterior_samples < 2:
         return {}
     noise, rate = product.knowledge_noise or (0.0, None)
     order = sorted(set(settings.axes) | set(records))
-    out = {a: posterior_sigma(rec, samples=settings.posterior_samples, seed=order.index(a),
-                              knowledge_noise_rad=noise, knowledge_rate_hz=rate)
-           for a, rec in sorted(records.items())}
-    local = local_errors(pairs, settings, product.time.size) if pairs and settings.sigma_local_error else {}
-    for a, rec in sorted(records.items()):
-        if not local or any(p not in local for p in rec.pairs):
+    return {a: posterior_sigma(rec, samples=settings.posterior_samples, seed=order.index(a),
+                               knowledge_noise_rad=noise, knowledge_rate_hz=rate)
+            for a, rec in sorted(records.items())}
+
+
+def raise_by_local_error(sigma: dict, records: dict, pairs: list, product: Product,
+                         settings: RestorationSettings) -> dict:
+    """With ``sigma_local_error``: each axis's σ raised, line by line, to the prediction with the local
+    matching error measured from ``pairs`` (as last synthesised; :func:`local_errors`,
+    :func:`restore.posterior.local_error_sigma`, :func:`restore.posterior.larger_sigma`), through the axis's
+    record; an axis already raised, or whose pairs have no measurement, is kept. Returns a new dict."""
+    if not settings.sigma_local_error or not sigma:
+        return sigma
+    todo = [a for a, ps in sorted(sigma.items()) if a in records and not np.isfinite(ps.local_detrended_rms)]
+    local = local_errors(pairs, settings, product.time.size) if todo else {}
+    noise, rate = product.knowledge_noise or (0.0, None)
+    order = sorted(set(settings.axes) | set(records))
+    out = dict(sigma)
+    for a in todo:
+        rec = records[a]
+        if any(p not in local for p in rec.pairs):
             continue
-        k = AXES.index(a)
-        measured = np.array([local[p][:, k] for p in rec.pairs])
-        out[a] = larger_sigma(out[a], local_error_sigma(rec, measured, samples=settings.posterior_samples,
-                                                        seed=order.index(a), knowledge_noise_rad=noise,
-                                                        knowledge_rate_hz=rate))
+        measured = np.array([local[p][:, AXES.index(a)] for p in rec.pairs])
+        out[a] = larger_sigma(sigma[a], local_error_sigma(rec, measured, samples=settings.posterior_samples,
+                                                          seed=order.index(a), knowledge_noise_rad=noise,
+                                                          knowledge_rate_hz=rate))
     return out
 
 
