@@ -301,7 +301,8 @@ def draw_uncertainty(axs, d: dict, axis: str, *, ifov_rad: float):
     if d["flagged"].any():
         tf = t[d["flagged"]]
         ax.plot(tf, np.zeros(tf.size), ls="none", marker="|", color="#000000", ms=8,
-                label=f"flagged ({int(d['flagged'].sum())} lines, σ > {d['flag_limit'] / ifov_rad:.3f} px)")
+                label=f"flagged ({int(d['flagged'].sum())} lines, "
+                      f"{'model σ' if d.get('flag_judged_on') == 'model' else 'σ'} > {d['flag_limit'] / ifov_rad:.3f} px)")
     ax.set_xlabel("time [s]")
     ax.set_ylabel(f"{axis} [px]")
     ax.legend(loc="upper right", fontsize=8, frameon=False, ncol=2)

@@ -238,8 +238,10 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
                                            "band_noise_shares": json.dumps(res.band_shares.get(a, {}),
                                                                            sort_keys=True),
                                            "predicted_detrended_rms_rad": float(res.detrended_rms.get(a, np.nan)),
-                                           "flag_limit_rad": sigma_limit(sg, res.settings.max_sigma_px,
-                                                                         res.pixel_ifov_rad)})
+                                           "flag_limit_rad": float(res.flag_limits[a][0]) if a in res.flag_limits
+                                           else sigma_limit(sg, res.settings.max_sigma_px, res.pixel_ifov_rad),
+                                           "flag_judged_on": res.flag_limits[a][1] if a in res.flag_limits
+                                           else "reported"})
         data[f"flagged_{a}"] = ("time", np.asarray(res.flagged.get(a, np.zeros(sg.size, bool)), dtype=np.int8), {
             "long_name": f"1: {a} not restored, predicted sigma above restoration.max_sigma_px"})
     coords.update({"time": ("time", res.time, {"units": "s"}), "pair": ("pair", np.array(names))})

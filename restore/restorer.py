@@ -103,7 +103,9 @@ class Restorer:
                 bar.note("predicted σ with the local matching error (two interleaved halves of the swath)")
             sigma = stages.raise_by_local_error(sigma, records, pairs, product, s)
             timings["local_error_sigma_s"] = _time.perf_counter() - t
-            estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad)
+            flag_limits: dict = {}
+            estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad,
+                                                      flag_limits)
             correction = stages.remove_mean(estimate, s.axes)
             restored = {a: knowledge[a] + correction[a] for a in AXES}
             anchored = False
@@ -135,6 +137,7 @@ class Restorer:
                                  method=resolved_method_name(s.method), integration=records,
                                  anchored=anchored, corrected=corrected,
                                  sigma={a: ps.sigma for a, ps in sigma.items()}, flagged=flagged,
+                                 flag_limits=flag_limits,
                                  noise_scale={a: ps.noise_scale for a, ps in sigma.items()},
                                  band_shares={a: ps.band_shares for a, ps in sigma.items()},
                                  detrended_rms={a: detrended_rms_over(ps, restored[a]) for a, ps in sigma.items()},

@@ -124,6 +124,9 @@ class RestorationResult:
     sigma: dict = field(default_factory=dict)
     #: per restored axis: lines not restored because their predicted σ exceeded ``max_sigma_px``
     flagged: dict = field(default_factory=dict)
+    #: axis → (limit [rad], "model" or "reported"): the flag limit applied and the σ it judged
+    #: (:func:`restore.stages.flag_uncertain`); empty when not recorded
+    flag_limits: dict = field(default_factory=dict)
     #: per restored axis: factor the residual check applied to the modelled noise
     noise_scale: dict = field(default_factory=dict)
     #: per restored axis: predicted RMS error [rad] once the record's trend (offset and slope, which no

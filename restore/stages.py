@@ -862,7 +862,8 @@ def sigma_limit(sigma: np.ndarray, setting, pixel_ifov_rad: float) -> float:
     return float(setting) * pixel_ifov_rad
 
 
-def flag_uncertain(correction: dict, sigma: dict, setting, pixel_ifov_rad: float) -> tuple[dict, dict]:
+def flag_uncertain(correction: dict, sigma: dict, setting, pixel_ifov_rad: float,
+                   limits: dict | None = None) -> tuple[dict, dict]:
     """Lines whose predicted σ exceeds the limit (:func:`sigma_limit`) are not restored (NaN), and flagged.
 
     Short clear islands between clouds and the lines at a gap's edge are
@@ -871,14 +872,19 @@ def flag_uncertain(correction: dict, sigma: dict, setting, pixel_ifov_rad: float
     (:func:`restore.posterior.larger_sigma`) is judged by the model's σ: the
     surrogate's random phases spread the local error over the whole record,
     so it sets the level, not where σ rises. Returns ``(correction,
-    flagged)`` with ``flagged[axis]`` a boolean per line.
+    flagged)`` with ``flagged[axis]`` a boolean per line; ``limits``, when
+    given, receives ``{axis: (limit [rad], "model" or "reported")}``: the
+    limit applied and the σ it was applied to.
     """
     out, flagged = dict(correction), {}
     for a, ps in sigma.items():
         # "auto" looks for lines where σ rises above the axis's own level: the shape of the model's σ, which knows
         # the per-line weights, gaps and ends (the local error's draws spread its series over the record)
-        sig = ps.model_sigma if setting == "auto" and ps.model_sigma is not None else ps.sigma
+        on_model = setting == "auto" and ps.model_sigma is not None
+        sig = ps.model_sigma if on_model else ps.sigma
         limit = sigma_limit(sig, setting, pixel_ifov_rad)
+        if limits is not None:
+            limits[a] = (limit, "model" if on_model else "reported")
         f = np.isfinite(out[a]) & ~(sig <= limit)
         out[a] = np.where(f, np.nan, out[a])
         flagged[a] = f

@@ -44,7 +44,8 @@ def uncertainty(run: RunData) -> dict:
     Returns
     -------
     dict
-        ``{axis: {time_s, sigma, flagged, flag_limit, predicted_rms, noise_scale, band_shares,
+        ``{axis: {time_s, sigma, flagged, flag_limit, flag_judged_on ("model": the model's σ before the local
+        error raised it, or "reported"), predicted_rms, noise_scale, band_shares,
         [error, actual_rms, ratio, within_2sigma, calibration]}}``; empty when
         the restoration carries no predicted σ (``posterior_samples = 0``).
     """
@@ -61,6 +62,7 @@ def uncertainty(run: RunData) -> dict:
         valid = np.isfinite(np.asarray(rest[a].values, dtype=np.float64)) & np.isfinite(sg)
         d = {"time_s": att["time_s"], "sigma": sg, "flagged": fl,
              "flag_limit": float(rest[f"sigma_{a}"].attrs.get("flag_limit_rad", np.nan)),
+             "flag_judged_on": str(rest[f"sigma_{a}"].attrs.get("flag_judged_on", "reported")),
              "noise_scale": float(rest[f"sigma_{a}"].attrs.get("noise_scale", 1.0)),
              "band_shares": json.loads(rest[f"sigma_{a}"].attrs.get("band_noise_shares", "{}")),
              "predicted_rms": float(np.sqrt(np.mean(sg[valid] ** 2))) if valid.any() else float("nan")}

@@ -435,6 +435,11 @@ def test_the_local_matching_error_raises_the_predicted_sigma_where_larger(tiny_r
         both = np.isfinite(s_on) & np.isfinite(off.sigma[a]) & np.isfinite(ps.sigma)
         assert both.sum() > 0.9 * np.isfinite(s_on).sum()
         np.testing.assert_allclose(s_on[both], np.maximum(off.sigma[a], ps.sigma)[both], rtol=1e-12)
+        # "auto" flags judge the model's σ (= σ with the local error off): 3 × its median, recorded as such
+        attrs = xr.load_dataset(d / "restoration.nc")[f"sigma_{a}"].attrs
+        assert attrs["flag_judged_on"] == "model"
+        assert attrs["flag_limit_rad"] == pytest.approx(3.0 * np.nanmedian(off.sigma[a]), rel=1e-12)
+        np.testing.assert_array_equal(on.flagged[a], off.flagged[a])
     with pytest.raises(ScenarioError, match="sigma_local_error"):
         restoration_settings({"sigma_local_error": "yes"})
 
