@@ -554,19 +554,8 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     -------
     PosteriorSigma
     """
-    if samples < 2:
-        raise ValueError(f"samples: must be >= 2, got {samples}")
-    d = np.asarray(record.diffs, dtype=np.float64)
-    valid = np.isfinite(d)
-    n = d.shape[1]
-    dt = float(record.line_period_s)
-    taus = [float(t) for t in record.taus]
-    # the draws see the recorded per-line lags: at large amplitude the time synchronisation's own error
-    # is a good part of the total
-    lags = [np.nan_to_num(np.asarray(lg, dtype=np.float64)) for lg in record.lags_s]
-    freq, psd = _prior(record)
+    d, valid, n, dt, taus, lags, freq, psd, ext = _draw_setup(record, samples)
     noise = noise_per_line(record)
-    ext = n + int(np.ceil((max(taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
     rng = np.random.default_rng(seed)
 
     def run(colour, k: int, check: bool, shared=None):
@@ -602,6 +591,22 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
                           detrended_sigma=np.sqrt(_line_variance(detrended(errs), smooth_lines)),
                           band_shares=shared.band_shares() if shared is not None else {},
                           colour_estimate=estimate)
+
+
+def _draw_setup(record, samples: int) -> tuple:
+    """What the Monte Carlo draws of a record need: (diffs, valid, lines, Δt, delays, per-line lags, prior
+    frequencies, prior PSD, lines drawn: the record plus the longest delay and lag)."""
+    if samples < 2:
+        raise ValueError(f"samples: must be >= 2, got {samples}")
+    d = np.asarray(record.diffs, dtype=np.float64)
+    n, dt = d.shape[1], float(record.line_period_s)
+    taus = [float(t) for t in record.taus]
+    # the draws see the recorded per-line lags: at large amplitude the time synchronisation's own error
+    # is a good part of the total
+    lags = [np.nan_to_num(np.asarray(lg, dtype=np.float64)) for lg in record.lags_s]
+    freq, psd = _prior(record)
+    ext = n + int(np.ceil((max(taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
+    return d, np.isfinite(d), n, dt, taus, lags, freq, psd, ext
 
 
 def _prior_and_reference(record, freq, psd, ext: int, rng) -> tuple:
@@ -644,18 +649,10 @@ def local_error_sigma(record, local: np.ndarray, *, samples: int = 8, seed: int 
     see an error that moves like an attitude, the local one does not hold an
     error every point of a line shares. :func:`larger_sigma` keeps the larger.
     """
-    if samples < 2:
-        raise ValueError(f"samples: must be >= 2, got {samples}")
-    d = np.asarray(record.diffs, dtype=np.float64)
-    valid = np.isfinite(d)
+    d, valid, n, dt, taus, lags, freq, psd, ext = _draw_setup(record, samples)
     loc = np.asarray(local, dtype=np.float64)
     if loc.shape != d.shape:
         raise ValueError(f"local: shape {loc.shape}, expected the record's (pair, line) {d.shape}")
-    n, dt = d.shape[1], float(record.line_period_s)
-    taus = [float(t) for t in record.taus]
-    lags = [np.nan_to_num(np.asarray(lg, dtype=np.float64)) for lg in record.lags_s]
-    freq, psd = _prior(record)
-    ext = n + int(np.ceil((max(taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
     x = np.where(valid, np.nan_to_num(loc), 0.0)
     spec = rfft(x - x.mean(axis=1, keepdims=True), axis=-1)
     rng = np.random.default_rng(seed)
