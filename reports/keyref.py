@@ -168,6 +168,14 @@ MEANING = {
     "part of the excess the AOCS knowledge proves is noise (what exceeds the most signal its ceiling leaves "
     "room for), then predict σ again. On by default; an axis whose product does not record its knowledge's "
     "filter, or with restoration.knowledge_prior = false, is not weighed",
+    "restoration.knowledge_noise_floor": "keep the estimated prior PSD at least at the AOCS knowledge's own white "
+    "noise (σ_k² / f_k through the spline interpolation, below f_k / 2, as product.nc records them): the "
+    "knowledge's error holds that noise whatever the attitude does; with restoration.knowledge_prior",
+    "restoration.highpass_per_axis": "with highpass_hz = \"auto\": an axis whose images beat the knowledge's noise "
+    "below the default high-pass (its crossover, as for the quarter rule) takes its crossover as its own "
+    "high-pass unless its differentials showed more power there than the knowledge's ceiling lets the attitude "
+    "have (the prior estimate clipped: a band's error every point of a line shares); the others keep the "
+    "default. The axis is integrated again; restoration.nc records each axis's high-pass",
     "restoration.posterior_samples": "Monte Carlo draws through the integration for the predicted 1-σ per line "
                                      "(restoration.nc sigma_<axis>); 0: none",
     "restoration.sigma_local_error": "predict σ also with the measured local matching error as the noise (the "

@@ -52,6 +52,8 @@ class PriorSpectrum:
     tones: tuple | None = None
     #: each pair's noise power relative to white, (freq [Hz], colour (pair, freq)), the MAP weighs with; or None
     noise_colour: tuple | None = None
+    #: bins of ``freq`` where the data's estimate reached the AOCS knowledge's ceiling (bool), or None
+    above_ceiling: np.ndarray | None = None
 
 
 @dataclass
@@ -142,7 +144,7 @@ def _prior_of(spectrum, n_pairs: int, tones=None) -> PriorSpectrum:
     """The :class:`PriorSpectrum` of a method's spectral estimate (noise level broadcast to every pair)."""
     return PriorSpectrum(np.asarray(spectrum.freq, dtype=np.float64), np.asarray(spectrum.psd, dtype=np.float64),
                          np.broadcast_to(np.asarray(spectrum.noise_std, dtype=np.float64), (n_pairs,)).copy(),
-                         tones=tones)
+                         tones=tones, above_ceiling=getattr(spectrum, "above_ceiling", None))
 
 
 def _with_blind_tone(res, prior, spec, diffs, measured, taus, dt, opts, data, lags, details):

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["knowledge_gain", "knowledge_response", "knowledge_psd_ceiling"]
+__all__ = ["knowledge_gain", "knowledge_response", "knowledge_psd_ceiling", "spline_response", "knowledge_noise_floor"]
 
 #: where the knowledge's gain is below this, the ceiling is infinite (the knowledge says nothing)
 MIN_GAIN = 1e-6
@@ -97,3 +97,29 @@ def knowledge_psd_ceiling(knowledge, dt: float, *, cutoff_hz: float, order: int,
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         ceiling = s_k * np.abs((1.0 - g) / g) ** 2 + noise_rad ** 2 / max(rate_hz, 1e-300)
     return f, np.where(np.abs(g) > MIN_GAIN, ceiling, np.inf)
+
+
+def spline_response(freq, rate_hz: float) -> np.ndarray:
+    """Frequency response of cubic-spline interpolation of samples taken at ``rate_hz`` (the cardinal cubic
+    spline: ``sinc⁴(f/f_s) / (2/3 + cos(2π f/f_s)/3)``; 1 at 0 Hz), at ``freq`` [Hz]."""
+    if not rate_hz > 0:
+        raise ValueError(f"rate_hz: must be > 0, got {rate_hz}")
+    x = np.abs(np.asarray(freq, dtype=np.float64)) / float(rate_hz)
+    return np.sinc(x) ** 4 / (2.0 / 3.0 + np.cos(2 * np.pi * x) / 3.0)
+
+
+def knowledge_noise_floor(freq, *, rate_hz: float, noise_rad: float) -> np.ndarray:
+    """Floor on the two-sided PSD of the knowledge's error [rad²/Hz], from its own white noise alone.
+
+    The knowledge is the attitude low-passed plus white noise of ``noise_rad``
+    per sample at ``rate_hz``, spline-interpolated to the lines: whatever the
+    attitude does, its error ``e = θ − k`` holds that noise, independent of
+    the attitude, so its PSD is at least ``σ_k² / f_k · |H(f)|²`` below
+    ``f_k / 2`` (``H``: :func:`spline_response`; the aliases only add to it).
+    Zero above ``f_k / 2``.
+    """
+    if not noise_rad >= 0:
+        raise ValueError(f"noise_rad: must be >= 0, got {noise_rad}")
+    f = np.abs(np.asarray(freq, dtype=np.float64))
+    floor = noise_rad ** 2 / rate_hz * spline_response(f, rate_hz) ** 2
+    return np.where(f <= 0.5 * rate_hz, floor, 0.0)

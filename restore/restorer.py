@@ -52,6 +52,13 @@ class _Progress:
         if self.bar is not None:
             self.bar.close()
 
+    def notes_only(self) -> "_Progress":
+        """The same bar, whose steps only say what is being done (a stage run again: the count stays right)."""
+        quiet = _Progress(False, 0)
+        quiet.bar = self.bar
+        quiet.step = quiet.note
+        return quiet
+
 
 class Restorer:
     """Restore the line-of-sight attitude of a product from its bands.
@@ -78,6 +85,7 @@ class Restorer:
         file opened lazily; otherwise they are kept in memory.
         """
         s = self.settings = self._settings_for(product)
+        self._axis_highpass = {}
         t_all = _time.perf_counter()
         timings: dict = {}
         pairs_ab = stages.resolve_pairs(product, s)
@@ -181,8 +189,11 @@ class Restorer:
                 f"restoration.min_quality = {s.min_quality}); nothing to restore")
         return pairs
 
-    def synthesise_and_integrate(self, product: Product, pairs: list, knowledge: dict, timings: dict, bar) -> tuple:
+    def synthesise_and_integrate(self, product: Product, pairs: list, knowledge: dict, timings: dict, bar, *,
+                                 only: tuple | None = None) -> tuple:
         """Iterate synthesis and integration; returns (pairs as last synthesised, records, estimate).
+
+        ``only``: integrate these axes alone (the synthesis still fits every restored axis).
 
         Each iteration re-predicts the matches with the knowledge plus the
         estimate so far, synthesises the differentials of the pairs in use and
@@ -208,7 +219,7 @@ class Restorer:
             differentials = [stages.pair_differentials(p, s, n_lines, te) for p in used]
             t_syn += _time.perf_counter() - ts
             ti = _time.perf_counter()
-            recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings)
+            recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings, only=only)
             # a line whose synthesis is a gross error stands out of what the integrated attitude predicts:
             # drop it (filled as a short gap) and integrate again
             drops = [stages.differential_spikes(p, d, inc, s, te) for p, d in zip(used, differentials)]
@@ -216,7 +227,7 @@ class Restorer:
                 timings["despiked_lines"] = timings.get("despiked_lines", 0) + sum(
                     int(m.sum()) for dr in drops for m in dr.values())
                 differentials = [stages.pair_differentials(p, s, n_lines, te, drop=dr) for p, dr in zip(used, drops)]
-                recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings)
+                recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings, only=only)
             # a line whose bands' windows are stretched against each other, or that lies next to a gap, matches
             # worse: weigh it by how its pair's fit residual grows with that, and integrate again
             factors = stages.line_weight_factors(differentials, recs, s, te)
@@ -225,10 +236,11 @@ class Restorer:
                     d.axis_factor = fac
                 # reweighting does not make a tone appear: where the search found none, it is not run again
                 toneless = {a for a, r in recs.items() if r.spectrum is not None and r.spectrum.tones is None}
-                recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings, toneless)
+                recs, inc = self._integrate_axes(product, used, differentials, estimate, ceilings, toneless,
+                                                 only=only)
             records.update(recs)
             change = 0.0
-            for a in s.axes:
+            for a in inc:
                 new_est = np.where(np.isfinite(inc[a]), np.nan_to_num(estimate[a]) + inc[a], np.nan)
                 if np.isfinite(new_est).any():
                     change = max(change, float(np.sqrt(np.nanmean(inc[a] ** 2)) /
@@ -247,14 +259,16 @@ class Restorer:
         return pairs, records, estimate
 
     def _integrate_axes(self, product: Product, used: list, differentials: list, estimate: dict,
-                        ceilings: dict, toneless: set = frozenset()) -> tuple:
-        """Integrate every restored axis's differentials once: ({axis: record}, {axis: increment}); the axes in
-        ``toneless`` without the search for a blind tone."""
+                        ceilings: dict, toneless: set = frozenset(), *, only: tuple | None = None) -> tuple:
+        """Integrate every restored axis's differentials once (``only``: these axes): ({axis: record}, {axis:
+        increment}); the axes in ``toneless`` without the search for a blind tone."""
         s = self.settings
-        recs = {a: stages.integrate_differentials(a, used, differentials, estimate[a], s,
+        hp = getattr(self, "_axis_highpass", {})
+        recs = {a: stages.integrate_differentials(a, used, differentials, estimate[a],
+                                                  replace(s, highpass_hz=hp[a]) if a in hp else s,
                                                   product.instrument.line_period_s, where=product.path,
                                                   psd_ceiling=ceilings.get(a), no_blind_tone=a in toneless)
-                for a in s.axes}
+                for a in (s.axes if only is None else only)}
         return recs, {a: r.increment for a, r in recs.items()}
 
     def weigh_noise_colour(self, product: Product, knowledge: dict, records: dict, estimate: dict, sigma: dict,
@@ -299,6 +313,8 @@ class Restorer:
         """With ``highpass_hz = "auto"``: when the AOCS knowledge is noisy enough that the images beat it well
         below the default high-pass (:func:`stages.knowledge_crossover_hz` under
         :data:`stages.CROSSOVER_FRACTION` of it), integrate again with the high-pass at that crossover.
+        Otherwise, with ``highpass_per_axis``, each axis the knowledge does not prove wrong below the default
+        takes its own crossover (:meth:`_axes_to_lower`) and is integrated again alone.
 
         Returns (pairs, records, estimate, sigma), new or as given.
         """
@@ -306,16 +322,55 @@ class Restorer:
         if self._given.highpass_hz != "auto" or not sigma:
             return pairs, records, estimate, sigma
         fx = stages.knowledge_crossover_hz(records, sigma, product, s.highpass_hz)
-        if fx is None or fx >= stages.CROSSOVER_FRACTION * s.highpass_hz:
+        if fx is None:
             return pairs, records, estimate, sigma
-        bar.note(f"AOCS knowledge noisy: high-pass {s.highpass_hz:.2f} → {fx:.2f} Hz, integrating again")
         t = _time.perf_counter()
-        self.settings = s = replace(s, highpass_hz=fx)
+        if fx < stages.CROSSOVER_FRACTION * s.highpass_hz:
+            bar.note(f"AOCS knowledge noisy: high-pass {s.highpass_hz:.2f} → {fx:.2f} Hz, integrating again")
+            self.settings = s = replace(s, highpass_hz=fx)
+            timings["highpass_lowered_hz"] = fx
+        else:
+            lowered = self._axes_to_lower(records, sigma, product) if s.highpass_per_axis else {}
+            if not lowered:
+                return pairs, records, estimate, sigma
+            bar.note("high-pass lowered to the knowledge crossover on " +
+                     ", ".join(f"{a} ({f:.2f} Hz)" for a, f in lowered.items()) + ", integrating again")
+            self._axis_highpass = lowered
+            timings["highpass_lowered_hz"] = dict(lowered)
+            # only the lowered axes are integrated again (and their σ predicted again); the others stand
+            recs, est = self.synthesise_and_integrate(product, list(pairs), knowledge, {}, bar.notes_only(),
+                                                      only=tuple(a for a in s.axes if a in lowered))[1:]
+            sigma = {**sigma, **stages.predicted_sigma(recs, product, s)}
+            records = {**records, **recs}
+            estimate = {**estimate, **{a: est[a] for a in recs}}
+            timings["highpass_lowering_s"] = _time.perf_counter() - t
+            return pairs, records, estimate, sigma
         pairs, records, estimate = self.synthesise_and_integrate(product, pairs, knowledge, {}, bar)
         sigma = stages.predicted_sigma(records, product, s)
-        timings["highpass_lowered_hz"] = fx
         timings["highpass_lowering_s"] = _time.perf_counter() - t
         return pairs, records, estimate, sigma
+
+    def _axes_to_lower(self, records: dict, sigma: dict, product: Product) -> dict:
+        """Per axis, the knowledge crossover (:func:`stages.knowledge_crossover_hz`) where it lies below the
+        high-pass and the differentials show nothing there that the knowledge proves not attitude
+        (:func:`stages.knowledge_proves_excess`); {axis: crossover [Hz]}.
+
+        Below the default high-pass the images' error is modelled from what the
+        residual shows, which misses a band's error common to a line's points;
+        but where that error is large enough to matter it lifts the prior the
+        differentials give above the ceiling the knowledge sets, and the axis
+        keeps the default (phr_cmg: pitch's prior at the ceiling at 0.6–3 Hz,
+        roll's far below it).
+        """
+        hp = float(self.settings.highpass_hz)
+        out = {}
+        for a, rec in records.items():
+            if a not in sigma:
+                continue
+            fa = stages.knowledge_crossover_hz({a: rec}, {a: sigma[a]}, product, hp)
+            if fa is not None and fa < hp and not stages.knowledge_proves_excess(rec, fa, hp):
+                out[a] = fa
+        return out
 
     def rematch(self, product: Product, pairs: list, knowledge: dict, records: dict, estimate: dict, timings: dict,
                 bar) -> tuple:

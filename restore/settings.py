@@ -48,6 +48,8 @@ class RestorationSettings:
     min_coverage: float = 0.05
     posterior_samples: int = 8
     noise_colour_weighting: bool = True
+    knowledge_noise_floor: bool = True
+    highpass_per_axis: bool = True
     sigma_local_error: bool = True
     knowledge_prior: bool = True
     rematch: int | str = "auto"
@@ -145,6 +147,8 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.min_coverage = sec.number("min_coverage", s.min_coverage, ge=0, le=1)
     s.knowledge_prior = sec.boolean("knowledge_prior", s.knowledge_prior)
     s.noise_colour_weighting = sec.boolean("noise_colour_weighting", s.noise_colour_weighting)
+    s.knowledge_noise_floor = sec.boolean("knowledge_noise_floor", s.knowledge_noise_floor)
+    s.highpass_per_axis = sec.boolean("highpass_per_axis", s.highpass_per_axis)
     rm = sec.raw("rematch", "auto")
     if rm != "auto" and (isinstance(rm, bool) or not isinstance(rm, int) or not 0 <= rm <= 5):
         raise sec.error("rematch", f"must be \"auto\" or a number of passes from 0 to 5, got {rm!r}")

@@ -24,7 +24,7 @@ from .integration.wiener import ceiling_on_grid, spectrum_for_lines
 from .matching import match_points, support_margin
 from .method_choice import predicted_differential, resolve_method
 from .observability import observability
-from .knowledge_prior import knowledge_psd_ceiling
+from .knowledge_prior import knowledge_noise_floor, knowledge_psd_ceiling
 from .line_weights import gap_distance, residual_weight_factors, window_stretch
 from .local_noise import local_matching_error
 from .posterior import fit_residuals, larger_sigma, local_error_sigma, posterior_sigma
@@ -43,7 +43,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "predicted_sigma", "raise_by_local_error", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "predicted_sigma", "raise_by_local_error", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -613,8 +613,30 @@ def knowledge_crossover_hz(records: dict, sigma: dict, product: Product, highpas
     return out
 
 
+def knowledge_proves_excess(record: IntegrationRecord, lo_hz: float, hi_hz: float) -> bool:
+    """Whether the axis's differentials showed, somewhere in ``[lo_hz, hi_hz)``, more than the attitude can have.
+
+    The prior estimated from the differentials is clipped to the AOCS
+    knowledge's ceiling (:func:`knowledge_ceilings`); where the estimate
+    reached it (``PriorSpectrum.above_ceiling``), the knowledge proves the
+    differentials hold power that is not attitude: a band's own error that
+    every point of a line shares, which no residual shows (phr_cmg's pitch at
+    0.6–3 Hz). True also when nothing is known (no ceiling, no spectrum): the
+    high-pass is then not lowered on that evidence.
+    """
+    spec = record.spectrum
+    above = None if spec is None else spec.above_ceiling
+    if above is None:
+        return True
+    f = np.asarray(spec.freq, dtype=np.float64)
+    band = (f >= lo_hz) & (f < hi_hz)
+    return bool(np.any(np.asarray(above, dtype=bool)[band]))
+
+
 def knowledge_ceilings(product: Product, knowledge: dict, settings: RestorationSettings) -> dict:
-    """Per axis, the ceiling the AOCS knowledge puts on the prior PSD (:mod:`restore.knowledge_prior`).
+    """Per axis, the ceiling the AOCS knowledge puts on the prior PSD (:mod:`restore.knowledge_prior`):
+    ``(freq, ceiling)``, or with ``knowledge_noise_floor`` ``(freq, ceiling, floor)``, the floor its own
+    white noise puts under it (:func:`~restore.knowledge_prior.knowledge_noise_floor`).
 
     Empty when ``knowledge_prior`` is off or the product does not record its
     knowledge's filter (cut-off, order, rate, noise).
@@ -625,10 +647,13 @@ def knowledge_ceilings(product: Product, knowledge: dict, settings: RestorationS
         return {}
     dt = product.instrument.line_period_s
     noise_rad, rate_hz = product.knowledge_noise
-    return {a: knowledge_psd_ceiling(knowledge[a], dt, cutoff_hz=float(attrs["knowledge_cutoff_hz"]),
-                                     order=int(attrs["knowledge_filter_order"]), rate_hz=rate_hz, noise_rad=noise_rad,
-                                     kind=str(attrs.get("knowledge_filter", "butterworth_zero_phase")))
-            for a in settings.axes}
+    out = {a: knowledge_psd_ceiling(knowledge[a], dt, cutoff_hz=float(attrs["knowledge_cutoff_hz"]),
+                                    order=int(attrs["knowledge_filter_order"]), rate_hz=rate_hz, noise_rad=noise_rad,
+                                    kind=str(attrs.get("knowledge_filter", "butterworth_zero_phase")))
+           for a in settings.axes}
+    if settings.knowledge_noise_floor:
+        out = {a: (f, c, knowledge_noise_floor(f, rate_hz=rate_hz, noise_rad=noise_rad)) for a, (f, c) in out.items()}
+    return out
 
 
 def integrate_differentials(axis: str, used: list, differentials: list, previous: np.ndarray,

@@ -121,7 +121,7 @@ def _psd_on_grid(psd, f: np.ndarray) -> np.ndarray:
 def ceiling_on_grid(ceiling, f: np.ndarray) -> np.ndarray:
     """A PSD ceiling ``(freq, ceiling)`` (:func:`restore.knowledge_prior.knowledge_psd_ceiling`) at the
     frequencies ``f``: interpolated, infinite beyond its end and next to an infinite value."""
-    fc, cc = (np.asarray(x, dtype=np.float64) for x in ceiling)
+    fc, cc = (np.asarray(x, dtype=np.float64) for x in ceiling[:2])
     if fc.shape != cc.shape or fc.ndim != 1 or np.any(np.diff(fc) <= 0) or np.any(np.isnan(cc)) or np.any(cc < 0):
         raise ValueError("psd_ceiling: must be (freq, ceiling) with increasing frequencies and ceilings >= 0")
     big = np.isinf(cc)
@@ -129,6 +129,17 @@ def ceiling_on_grid(ceiling, f: np.ndarray) -> np.ndarray:
     # a bin next to an infinite ceiling is unbounded (interpolating towards inf gives inf anyway)
     out[np.interp(f, fc, big.astype(float)) > 0] = np.inf
     return out
+
+
+def floor_on_grid(ceiling, f: np.ndarray) -> np.ndarray:
+    """The PSD floor of a ``(freq, ceiling, floor)`` triple at the frequencies ``f`` (zero without one, and
+    beyond its end)."""
+    if len(ceiling) < 3:
+        return np.zeros(np.shape(f))
+    fc, fl = np.asarray(ceiling[0], dtype=np.float64), np.asarray(ceiling[2], dtype=np.float64)
+    if fl.shape != fc.shape or np.any(~np.isfinite(fl)) or np.any(fl < 0):
+        raise ValueError("psd_ceiling: its floor must be finite and >= 0 on the ceiling's frequencies")
+    return np.interp(f, fc, fl, right=0.0)
 
 
 def _colour_on_grid(noise_colour, f: np.ndarray, p: int) -> np.ndarray:
@@ -476,9 +487,14 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
     colour = None if noise_colour is None else _colour_on_grid(noise_colour, spec.freq, p)
     grid = None
     ceiling = None if psd is not None or psd_ceiling is None else ceiling_on_grid(psd_ceiling, spec.freq)
+    floor = None if ceiling is None else np.minimum(floor_on_grid(psd_ceiling, spec.freq), ceiling)
+    above = None
     for k in range(passes + 1):
         if ceiling is not None:
-            spec.psd = np.minimum(spec.psd, ceiling)
+            # where the data's estimate reaches the ceiling, the differentials show more than the attitude can
+            # have there: the AOCS knowledge proves the excess is theirs (kept for the choice of the high-pass)
+            above = spec.psd >= ceiling
+            spec.psd = np.clip(spec.psd, floor, ceiling)
         S = spec.psd.copy() if psd is None else _psd_on_grid(psd, spec.freq)
         S[0] = 0.0
         if m % 2 == 0:
@@ -504,6 +520,7 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         wave = tone_waves(tones[0], m, dt, int(tones[2]) if len(tones) > 2 else 0, n_record=n) @ coefs
         full, grid = full + wave[:n], grid + wave
     theta = _finish(full, valid, taus, dt, max_gap_s)
+    spec.above_ceiling = above
     if return_details:
         r = WienerResult(theta, full - np.mean(full), spec, it, res, theta_grid=grid - np.mean(full))
         r.tones = coefs

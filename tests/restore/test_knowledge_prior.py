@@ -192,3 +192,121 @@ def test_knowledge_crossover_follows_the_formula_and_the_knowledge_noise():
     no_colour = PosteriorSigma(sigma=np.zeros(n), noise_scale=1.0, samples=8)
     assert knowledge_crossover_hz({"roll": rec}, {"roll": no_colour}, product(0.3), 2.0) is None
     assert knowledge_crossover_hz({"roll": rec}, {"roll": ps}, SimpleNamespace(knowledge_noise=None), 2.0) is None
+
+
+def test_spline_response_is_the_cardinal_cubic_splines():
+    """White samples at 64 Hz, spline-interpolated to the lines: their PSD is σ²/f_s |H|² (+ small aliases)."""
+    from scipy.interpolate import CubicSpline
+
+    from restore.knowledge_prior import knowledge_noise_floor, spline_response
+
+    rate, sigma = 64.0, 1.0
+    rng = np.random.default_rng(4)
+    n_s = 64 * 400
+    ts = np.arange(n_s) / rate
+    t = np.arange(int(n_s / rate / DT) - 10) * DT
+    psd = 0.0
+    for _ in range(4):
+        x = CubicSpline(ts, sigma * rng.standard_normal(n_s))(t)
+        psd = psd + np.abs(np.fft.rfft(x)) ** 2 * DT / t.size / 4
+    f = np.fft.rfftfreq(t.size, DT)
+    assert spline_response(0.0, rate) == pytest.approx(1.0)
+    floor = knowledge_noise_floor(f, rate_hz=rate, noise_rad=sigma)
+    for lo, hi in ((1, 4), (8, 12), (14, 18), (24, 30)):
+        band = (f >= lo) & (f < hi)
+        ratio = psd[band].mean() / floor[band].mean()
+        assert 1.0 - 0.05 <= ratio < 1.0 + 0.05 + (0.25 if lo > 20 else 0.02)   # aliases only add, near f_s/2
+    assert np.all(floor[f > rate / 2] == 0.0)
+    with pytest.raises(ValueError, match="rate_hz"):
+        spline_response(1.0, 0.0)
+
+
+def test_the_knowledge_noise_floor_lifts_a_prior_the_differentials_left_too_low():
+    """Differentials of an attitude that is the knowledge's white noise alone: the estimate from them puts
+    (near) nothing at low frequencies; with the floor the prior holds at least σ_k²/f_k there (what it does
+    to the accuracy is the benches' business: on this synthetic case it is within the seeds' scatter)."""
+    from scipy.interpolate import CubicSpline
+
+    from restore.knowledge_prior import knowledge_noise_floor
+
+    n, rate, sk = 4000, 64.0, 0.3e-6
+    rng = np.random.default_rng(7)
+    taus = [7.4e-3, 14.8e-3, 22.2e-3]
+    ts = np.arange(-8, int((n + 100) * DT * rate) + 8) / rate
+    theta = CubicSpline(ts, sk * rng.standard_normal(ts.size))(np.arange(n + 100) * DT)
+    valid = np.ones((3, n), bool)
+    d = simulated_differentials(theta, taus, np.zeros((3, n)), valid, DT) + 0.2e-6 * rng.standard_normal((3, n))
+    f, c = knowledge_psd_ceiling(np.zeros(n), DT, cutoff_hz=10.0, order=4, rate_hz=rate, noise_rad=sk)
+    floor = knowledge_noise_floor(f, rate_hz=rate, noise_rad=sk)
+    plain = integrate_wiener(list(d), taus, DT, psd_ceiling=(f, c), return_details=True)
+    lifted = integrate_wiener(list(d), taus, DT, psd_ceiling=(f, c, floor), return_details=True)
+    fg = lifted.spectrum.freq
+    low = (fg > 1.0) & (fg < 10.0)
+    assert np.all(lifted.spectrum.psd[low] >= np.interp(fg[low], f, floor) * (1 - 1e-9))
+    assert np.mean(plain.spectrum.psd[low]) < np.mean(lifted.spectrum.psd[low])
+
+    # a malformed floor is refused
+    with pytest.raises(ValueError, match="floor"):
+        integrate_wiener(list(d), taus, DT, psd_ceiling=(f, c, -floor))
+
+
+def test_above_ceiling_marks_where_the_differentials_show_more_than_the_attitude_can_have():
+    """A slow error on every pair (a band's error common to a line) under a 10 Hz AOCS: the estimate
+    reaches the ceiling at low frequencies, and knowledge_proves_excess says so; white noise alone does not."""
+    from types import SimpleNamespace
+
+    from restore.stages import knowledge_proves_excess
+
+    n = 4000
+    rng = np.random.default_rng(2)
+    taus = [7.4e-3, 14.8e-3, 22.2e-3]
+    t = np.arange(n) * DT
+    noise = 0.1e-6 * rng.standard_normal((3, n))
+    drift = 0.2e-6 * np.sin(2 * np.pi * 1.3 * t + 0.4)        # the band error: 0.05 px at 1.3 Hz
+    f, c = knowledge_psd_ceiling(np.zeros(n), DT, cutoff_hz=10.0, order=4, rate_hz=64.0, noise_rad=0.3e-6)
+    seen = integrate_wiener(list(noise + drift), taus, DT, psd_ceiling=(f, c), return_details=True)
+    clean = integrate_wiener(list(noise), taus, DT, psd_ceiling=(f, c), return_details=True)
+
+    def rec(res):
+        return SimpleNamespace(spectrum=SimpleNamespace(freq=res.spectrum.freq,
+                                                        above_ceiling=res.spectrum.above_ceiling))
+
+    assert knowledge_proves_excess(rec(seen), 0.9, 2.0)
+    assert not knowledge_proves_excess(rec(clean), 0.9, 2.0)
+    # nothing known: not lowered on that evidence
+    assert knowledge_proves_excess(SimpleNamespace(spectrum=None), 0.9, 2.0)
+    no_ceiling = integrate_wiener(list(noise), taus, DT, return_details=True)
+    assert knowledge_proves_excess(rec(no_ceiling), 0.9, 2.0)
+
+
+def test_an_axis_takes_its_crossover_unless_the_knowledge_proves_its_differentials_wrong_there():
+    """Two axes with the same noise: the one whose prior reached the ceiling between the crossover and the
+    high-pass keeps the high-pass; the other is lowered to its crossover; none above the high-pass."""
+    from types import SimpleNamespace
+
+    from restore.posterior import PosteriorSigma
+    from restore.restorer import Restorer
+    from restore.settings import RestorationSettings
+    from restore.stages import knowledge_crossover_hz
+
+    dt, n = 4e-4, 4000
+    taus = np.array([7.4e-3, 14.8e-3, 22.2e-3])
+    freq = np.fft.rfftfreq(n, dt)
+
+    def rec(excess_at):
+        above = np.zeros(freq.size, bool)
+        if excess_at is not None:
+            above[np.argmin(np.abs(freq - excess_at))] = True
+        return SimpleNamespace(line_period_s=dt, diffs=np.zeros((3, n)), taus=taus,
+                               spectrum=SimpleNamespace(noise_std=np.full(3, 0.3e-6), freq=freq, above_ceiling=above))
+
+    ps = PosteriorSigma(sigma=np.zeros(n), noise_scale=1.0, samples=8, noise_colour=np.full((3, n // 2 + 1), 3.0))
+    product = SimpleNamespace(knowledge_noise=(0.3e-6, 64.0))
+    r = Restorer(RestorationSettings(highpass_hz=2.0))
+    records = {"roll": rec(None), "pitch": rec(1.8), "yaw": rec(2.5)}
+    fx = knowledge_crossover_hz({"roll": records["roll"]}, {"roll": ps}, product, 2.0)
+    assert 0 < fx < 2.0
+    got = r._axes_to_lower(records, {"roll": ps, "pitch": ps, "yaw": ps}, product)
+    assert got == {"roll": pytest.approx(fx), "yaw": pytest.approx(fx)}   # yaw's excess is above the high-pass
+    # a knowledge so good that the crossover lies above the high-pass: nothing lowered
+    assert r._axes_to_lower(records, {"roll": ps}, SimpleNamespace(knowledge_noise=(0.3e-9, 64.0))) == {}

@@ -629,6 +629,8 @@ def test_gradient_reader_equals_the_whole_band_gradient():
 
 def test_a_noisy_aocs_knowledge_lowers_the_auto_highpass(tiny_restored, tmp_path):
     """The product says its knowledge is noisy: the images take over below the default high-pass."""
+    from restore import stages
+
     d, res0 = tiny_restored
     run = tmp_path / "tiny"
     shutil.copytree(d, run)
@@ -644,8 +646,20 @@ def test_a_noisy_aocs_knowledge_lowers_the_auto_highpass(tiny_restored, tmp_path
     ds.attrs["knowledge_noise_urad"] = 30.0 * res.settings.highpass_hz / (0.35 * res0.settings.highpass_hz)
     ds.to_netcdf(run / "product_noisy.nc")
     shutil.move(run / "product_noisy.nc", run / "product.nc")
-    kept = restore_run(run, progress=False, overrides={"correct_images": False})
+    kept = restore_run(run, progress=False, overrides={"correct_images": False, "highpass_per_axis": False})
     assert kept.settings.highpass_hz == res0.settings.highpass_hz and "highpass_lowered_hz" not in kept.timings
+    # axis by axis: an axis whose differentials the knowledge does not prove wrong below the default takes
+    # its own crossover, the others keep the default; the settings' high-pass stays the default
+    each = restore_run(run, progress=False, overrides={"correct_images": False})
+    assert each.settings.highpass_hz == res0.settings.highpass_hz
+    lowered = each.timings.get("highpass_lowered_hz", {})
+    assert isinstance(lowered, dict)
+    for a, rec in each.integration.items():
+        if a in lowered:
+            assert rec.highpass_hz == lowered[a] < res0.settings.highpass_hz
+            assert not stages.knowledge_proves_excess(kept.integration[a], lowered[a], res0.settings.highpass_hz)
+        else:
+            assert rec.highpass_hz == res0.settings.highpass_hz
     ds.attrs["knowledge_noise_urad"] = 30.0
     ds.to_netcdf(run / "product_noisy.nc")
     shutil.move(run / "product_noisy.nc", run / "product.nc")
