@@ -170,12 +170,12 @@ MEANING = {
     "filter, or with restoration.knowledge_prior = false, is not weighed",
     "restoration.knowledge_noise_floor": "keep the estimated prior PSD at least at the AOCS knowledge's own white "
     "noise (σ_k² / f_k through the spline interpolation, below f_k / 2, as product.nc records them): the "
-    "knowledge's error holds that noise whatever the attitude does; with restoration.knowledge_prior",
+    "knowledge's error holds that noise whatever the attitude does; with restoration.knowledge_prior. Off by default (see highpass_per_axis)",
     "restoration.highpass_per_axis": "with highpass_hz = \"auto\": an axis whose images beat the knowledge's noise "
     "below the default high-pass (its crossover, as for the quarter rule) takes its crossover as its own "
     "high-pass unless its differentials showed more power there than the knowledge's ceiling lets the attitude "
     "have (the prior estimate clipped: a band's error every point of a line shares); the others keep the "
-    "default. The axis is integrated again; restoration.nc records each axis's high-pass",
+    "default. The axis is integrated again; restoration.nc records each axis's high-pass. Off by default: roll gained on every scenario where it was lowered (phr_cmg 0.0238 → 0.0212 px), but pitch lost on two stress scenarios whose band error the evidence did not show (damped_chirp 0.0320 → 0.0357)",
     "restoration.posterior_samples": "Monte Carlo draws through the integration for the predicted 1-σ per line "
                                      "(restoration.nc sigma_<axis>); 0: none",
     "restoration.sigma_local_error": "predict σ also with the measured local matching error as the noise (the "

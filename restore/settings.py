@@ -48,8 +48,8 @@ class RestorationSettings:
     min_coverage: float = 0.05
     posterior_samples: int = 8
     noise_colour_weighting: bool = True
-    knowledge_noise_floor: bool = True
-    highpass_per_axis: bool = True
+    knowledge_noise_floor: bool = False
+    highpass_per_axis: bool = False
     sigma_local_error: bool = True
     knowledge_prior: bool = True
     rematch: int | str = "auto"

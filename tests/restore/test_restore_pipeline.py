@@ -646,11 +646,12 @@ def test_a_noisy_aocs_knowledge_lowers_the_auto_highpass(tiny_restored, tmp_path
     ds.attrs["knowledge_noise_urad"] = 30.0 * res.settings.highpass_hz / (0.35 * res0.settings.highpass_hz)
     ds.to_netcdf(run / "product_noisy.nc")
     shutil.move(run / "product_noisy.nc", run / "product.nc")
-    kept = restore_run(run, progress=False, overrides={"correct_images": False, "highpass_per_axis": False})
+    kept = restore_run(run, progress=False, overrides={"correct_images": False})
     assert kept.settings.highpass_hz == res0.settings.highpass_hz and "highpass_lowered_hz" not in kept.timings
     # axis by axis: an axis whose differentials the knowledge does not prove wrong below the default takes
     # its own crossover, the others keep the default; the settings' high-pass stays the default
-    each = restore_run(run, progress=False, overrides={"correct_images": False})
+    each = restore_run(run, progress=False, overrides={"correct_images": False, "highpass_per_axis": True,
+                                                       "knowledge_noise_floor": True})
     assert each.settings.highpass_hz == res0.settings.highpass_hz
     lowered = each.timings.get("highpass_lowered_hz", {})
     assert isinstance(lowered, dict)
