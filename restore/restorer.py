@@ -54,10 +54,17 @@ class _Progress:
 
     def notes_only(self) -> "_Progress":
         """The same bar, whose steps only say what is being done (a stage run again: the count stays right)."""
-        quiet = _Progress(False, 0)
-        quiet.bar = self.bar
-        quiet.step = quiet.note
-        return quiet
+        return _NotesOnly(self)
+
+
+class _NotesOnly(_Progress):
+    """A :class:`_Progress` sharing another's bar; a step only names what is being done."""
+
+    def __init__(self, progress: _Progress):
+        self.bar = progress.bar
+
+    def step(self, label: str):
+        self.note(label)
 
 
 class Restorer:

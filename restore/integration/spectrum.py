@@ -123,6 +123,10 @@ class SpectralEstimate:
         FFT length.
     dt : float
         Sampling step (s).
+    above_ceiling : ndarray of bool or None
+        Frequencies where the estimate reached the ceiling a caller clipped it
+        to (the AOCS knowledge's, :func:`restore.integration.wiener.integrate_wiener`);
+        None when it was not clipped.
     """
 
     freq: np.ndarray
@@ -131,6 +135,7 @@ class SpectralEstimate:
     detected: np.ndarray
     n_fft: int
     dt: float
+    above_ceiling: np.ndarray | None = None
 
     @property
     def variance(self) -> float:
