@@ -63,6 +63,7 @@ def test_only_the_same_settings_are_compared():
     assert prev is None and ch == [] and "no earlier record" in format_comparison(prev, latest, ch)
 
 
+@pytest.mark.slow
 def test_a_deliberately_degraded_setting_is_flagged_as_a_regression(tmp_path):
     """The real bench on `tiny`, twice the same (no regression: same seed, same bytes), then with a degraded
     restoration (8 points per line, an 11-column window): flagged."""

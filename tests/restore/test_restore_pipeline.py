@@ -511,6 +511,7 @@ def test_actual_delay_tau_prime_is_recorded_and_integrated_with(tiny_restored):
             assert rec.taus[j] == p.tau_s
 
 
+@pytest.mark.slow
 def test_star_tracker_anchoring_removes_a_knowledge_bias(tmp_path):
     """An AOCS knowledge with a bias (and a drift, a delay, a causal filter): the image restoration removes
     the mean it cannot see, so the absolute (not mean-removed) error keeps the bias unless the restored
@@ -629,8 +630,6 @@ def test_gradient_reader_equals_the_whole_band_gradient():
 
 def test_a_noisy_aocs_knowledge_lowers_the_auto_highpass(tiny_restored, tmp_path):
     """The product says its knowledge is noisy: the images take over below the default high-pass."""
-    from restore import stages
-
     d, res0 = tiny_restored
     run = tmp_path / "tiny"
     shutil.copytree(d, run)
@@ -648,6 +647,37 @@ def test_a_noisy_aocs_knowledge_lowers_the_auto_highpass(tiny_restored, tmp_path
     shutil.move(run / "product_noisy.nc", run / "product.nc")
     kept = restore_run(run, progress=False, overrides={"correct_images": False})
     assert kept.settings.highpass_hz == res0.settings.highpass_hz and "highpass_lowered_hz" not in kept.timings
+    ds.attrs["knowledge_noise_urad"] = 30.0
+    ds.to_netcdf(run / "product_noisy.nc")
+    shutil.move(run / "product_noisy.nc", run / "product.nc")
+    assert all(rec.highpass_hz == res.settings.highpass_hz for rec in res.integration.values())
+    # a given high-pass is kept as given; so is the default without the measured noise colour
+    assert restore_run(run, progress=False, overrides={"correct_images": False, "highpass_hz": 2.0}
+                       ).settings.highpass_hz == 2.0
+    assert restore_run(run, progress=False, overrides={"correct_images": False, "posterior_samples": 0}
+                       ).settings.highpass_hz == res0.settings.highpass_hz
+
+
+@pytest.mark.slow
+def test_per_axis_highpass_lowers_only_the_axes_the_knowledge_does_not_prove_wrong(tiny_restored, tmp_path):
+    """highpass_per_axis (off by default): an axis whose differentials the knowledge does not prove wrong below
+    the default takes its own crossover, the others keep the default; the settings' high-pass stays the default."""
+    from restore import stages
+
+    d, res0 = tiny_restored
+    run = tmp_path / "tiny"
+    shutil.copytree(d, run)
+    ds = xr.load_dataset(run / "product.nc")
+    ds.attrs["knowledge_noise_urad"] = 30.0
+    ds.to_netcdf(run / "product_noisy.nc")
+    shutil.move(run / "product_noisy.nc", run / "product.nc")
+    res = restore_run(run, progress=False, overrides={"correct_images": False})
+    # a knowledge noisy enough to put the common crossover at 0.35 × the default leaves the default alone
+    ds.attrs["knowledge_noise_urad"] = 30.0 * res.settings.highpass_hz / (0.35 * res0.settings.highpass_hz)
+    ds.to_netcdf(run / "product_noisy.nc")
+    shutil.move(run / "product_noisy.nc", run / "product.nc")
+    kept = restore_run(run, progress=False, overrides={"correct_images": False})
+    assert kept.settings.highpass_hz == res0.settings.highpass_hz
     # axis by axis: an axis whose differentials the knowledge does not prove wrong below the default takes
     # its own crossover, the others keep the default; the settings' high-pass stays the default
     each = restore_run(run, progress=False, overrides={"correct_images": False, "highpass_per_axis": True,
@@ -661,15 +691,6 @@ def test_a_noisy_aocs_knowledge_lowers_the_auto_highpass(tiny_restored, tmp_path
             assert not stages.knowledge_proves_excess(kept.integration[a], lowered[a], res0.settings.highpass_hz)
         else:
             assert rec.highpass_hz == res0.settings.highpass_hz
-    ds.attrs["knowledge_noise_urad"] = 30.0
-    ds.to_netcdf(run / "product_noisy.nc")
-    shutil.move(run / "product_noisy.nc", run / "product.nc")
-    assert all(rec.highpass_hz == res.settings.highpass_hz for rec in res.integration.values())
-    # a given high-pass is kept as given; so is the default without the measured noise colour
-    assert restore_run(run, progress=False, overrides={"correct_images": False, "highpass_hz": 2.0}
-                       ).settings.highpass_hz == 2.0
-    assert restore_run(run, progress=False, overrides={"correct_images": False, "posterior_samples": 0}
-                       ).settings.highpass_hz == res0.settings.highpass_hz
 
 
 def test_a_trend_in_the_truth_is_named_as_unobservable_and_leaves_the_rest_unchanged(tiny_restored, tmp_path):

@@ -6,6 +6,7 @@ without the tone's sidebands, leaves nothing in the notch to search)."""
 import dataclasses
 
 import numpy as np
+import pytest
 
 from restore.axis_integration import integrate_axis
 from restore.integration import methods
@@ -153,6 +154,7 @@ def _with_misfit_near_the_notch(diffs, n, px, seed=5):
     return out
 
 
+@pytest.mark.slow
 def test_misfit_the_noise_model_does_not_hold_finds_no_tone_but_a_real_tone_is_still_found(monkeypatch):
     """The χ² threshold holds under the noise model. With 1 px of misfit near the notch the plain test takes it
     for a tone; the control tones moved a few bins away measure the misfit, and only a real tone beats it."""
@@ -211,6 +213,7 @@ def test_a_line_inside_the_notch_that_one_pair_sees_is_found_and_restored(monkey
     assert notch_peaks(D, valid, taus, dt, np.full(3, 0.08 * IFOV), centres, exclude_hz=1.5 / (n * DT)) == []
 
 
+@pytest.mark.slow
 def test_a_line_in_each_of_two_notches_gets_a_tone_each():
     """Lines 1.9 Hz below 135.1 Hz and 3.8 Hz below 270.3 Hz (a CMG exciter and its harmonic): one tone per
     notch, both kept (with one tone in all the other line stayed whole); never two in the same notch."""
@@ -236,6 +239,7 @@ def test_a_line_in_each_of_two_notches_gets_a_tone_each():
     assert len(one[0]) == 1
 
 
+@pytest.mark.slow
 def test_the_modulation_degree_rises_where_the_line_drifts_and_not_where_it_is_steady():
     """A line drifting by 1.2 Hz over the record across the blind frequency (a quarter turn of phase at the
     ends beyond a quadratic's reach) gets a degree above 2 and a smaller error than with degree 2; a steady

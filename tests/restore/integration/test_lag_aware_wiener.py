@@ -66,7 +66,7 @@ def test_wiener_refuses_lags_of_the_wrong_shape():
         integrate_wiener(diffs, TAUS, DT, lags=lags[:2])
 
 
-@pytest.mark.parametrize("amplitude", [6e-6, 10e-6])
+@pytest.mark.parametrize("amplitude", [6e-6, pytest.param(10e-6, marks=pytest.mark.slow)])
 def test_pipeline_integration_models_the_lags_rather_than_correcting_the_data(monkeypatch, amplitude):
     """integrate_axis with the Wiener (prior_lags): the prior from differentials corrected once, then the
     measured ones with the lags modelled, beats the correction alone (the first fit's error times the lag)."""
@@ -80,6 +80,7 @@ def test_pipeline_integration_models_the_lags_rather_than_correcting_the_data(mo
     assert _error_px(modelled, truth) < 0.01
 
 
+@pytest.mark.slow
 def test_the_prior_is_estimated_again_on_differentials_corrected_with_the_lag_aware_estimate():
     """At ~3.5 px of jitter the least-squares first estimate, which fits the noise too, corrects part of
     the noise out of the differentials (noise levels ~8 % low) and leaves the lags' sidebands, which the
