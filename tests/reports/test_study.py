@@ -93,6 +93,7 @@ def test_differential_point_scores_the_restoration_and_a_failed_point_is_recorde
     assert bad["error"] and "lines" in bad["error"]
 
 
+@pytest.mark.slow
 def test_study_on_a_local_cluster_of_two_workers(study_file, tmp_path):
     spec = load_study(study_file)
     res = run_study(spec, tmp_path / "out", workers=2, progress=False)

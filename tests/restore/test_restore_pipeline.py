@@ -628,6 +628,7 @@ def test_gradient_reader_equals_the_whole_band_gradient():
         np.testing.assert_array_equal(read(s), whole[s])
 
 
+@pytest.mark.slow
 def test_a_noisy_aocs_knowledge_lowers_the_auto_highpass(tiny_restored, tmp_path):
     """The product says its knowledge is noisy: the images take over below the default high-pass."""
     d, res0 = tiny_restored

@@ -127,7 +127,7 @@ def _record(seed, band_sd, pair_sd):
     return rec, th
 
 
-@pytest.mark.parametrize("band_sd, pair_sd", [(0.2e-6, 0.05e-6), (0.0, 0.3e-6)])
+@pytest.mark.parametrize("band_sd, pair_sd", [(0.2e-6, 0.05e-6), pytest.param(0.0, 0.3e-6, marks=pytest.mark.slow)])
 def test_predicted_sigma_is_the_actual_error_when_bands_share_their_noise(band_sd, pair_sd):
     """The actual error over independent records of the model: with band noise the independent-pair model
     under-predicts it; the shared split does not, and it changes nothing much when no band is shared."""
