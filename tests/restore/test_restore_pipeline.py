@@ -628,6 +628,13 @@ def test_gradient_reader_equals_the_whole_band_gradient():
         np.testing.assert_array_equal(read(s), whole[s])
 
 
+def _claim_knowledge_noise(run, ds, noise_urad: float) -> None:
+    """Rewrite ``run``'s product.nc from ``ds`` with the AOCS knowledge's noise it records set to ``noise_urad``."""
+    ds.attrs["knowledge_noise_urad"] = noise_urad
+    ds.to_netcdf(run / "product_noisy.nc")
+    shutil.move(run / "product_noisy.nc", run / "product.nc")
+
+
 @pytest.mark.slow
 def test_a_noisy_aocs_knowledge_lowers_the_auto_highpass(tiny_restored, tmp_path):
     """The product says its knowledge is noisy: the images take over below the default high-pass."""
@@ -635,22 +642,16 @@ def test_a_noisy_aocs_knowledge_lowers_the_auto_highpass(tiny_restored, tmp_path
     run = tmp_path / "tiny"
     shutil.copytree(d, run)
     ds = xr.load_dataset(run / "product.nc")
-    ds.attrs["knowledge_noise_urad"] = 30.0              # 100× what tiny's AOCS claims
-    ds.to_netcdf(run / "product_noisy.nc")
-    shutil.move(run / "product_noisy.nc", run / "product.nc")
+    _claim_knowledge_noise(run, ds, 30.0)  # 100× what tiny's AOCS claims
     res = restore_run(run, progress=False, overrides={"correct_images": False})
     assert res.settings.highpass_hz < 0.25 * res0.settings.highpass_hz
     assert res.timings["highpass_lowered_hz"] == res.settings.highpass_hz
     # the crossover scales as 1 / σ_k: a knowledge noisy enough to put it at 0.35 × the default (within the
     # margin the images' optimistic low-frequency error model needs) leaves the default alone
-    ds.attrs["knowledge_noise_urad"] = 30.0 * res.settings.highpass_hz / (0.35 * res0.settings.highpass_hz)
-    ds.to_netcdf(run / "product_noisy.nc")
-    shutil.move(run / "product_noisy.nc", run / "product.nc")
+    _claim_knowledge_noise(run, ds, 30.0 * res.settings.highpass_hz / (0.35 * res0.settings.highpass_hz))
     kept = restore_run(run, progress=False, overrides={"correct_images": False})
     assert kept.settings.highpass_hz == res0.settings.highpass_hz and "highpass_lowered_hz" not in kept.timings
-    ds.attrs["knowledge_noise_urad"] = 30.0
-    ds.to_netcdf(run / "product_noisy.nc")
-    shutil.move(run / "product_noisy.nc", run / "product.nc")
+    _claim_knowledge_noise(run, ds, 30.0)
     assert all(rec.highpass_hz == res.settings.highpass_hz for rec in res.integration.values())
     # a given high-pass is kept as given; so is the default without the measured noise colour
     assert restore_run(run, progress=False, overrides={"correct_images": False, "highpass_hz": 2.0}
@@ -669,14 +670,10 @@ def test_per_axis_highpass_lowers_only_the_axes_the_knowledge_does_not_prove_wro
     run = tmp_path / "tiny"
     shutil.copytree(d, run)
     ds = xr.load_dataset(run / "product.nc")
-    ds.attrs["knowledge_noise_urad"] = 30.0
-    ds.to_netcdf(run / "product_noisy.nc")
-    shutil.move(run / "product_noisy.nc", run / "product.nc")
+    _claim_knowledge_noise(run, ds, 30.0)
     res = restore_run(run, progress=False, overrides={"correct_images": False})
     # a knowledge noisy enough to put the common crossover at 0.35 × the default leaves the default alone
-    ds.attrs["knowledge_noise_urad"] = 30.0 * res.settings.highpass_hz / (0.35 * res0.settings.highpass_hz)
-    ds.to_netcdf(run / "product_noisy.nc")
-    shutil.move(run / "product_noisy.nc", run / "product.nc")
+    _claim_knowledge_noise(run, ds, 30.0 * res.settings.highpass_hz / (0.35 * res0.settings.highpass_hz))
     kept = restore_run(run, progress=False, overrides={"correct_images": False})
     assert kept.settings.highpass_hz == res0.settings.highpass_hz
     # axis by axis: an axis whose differentials the knowledge does not prove wrong below the default takes
