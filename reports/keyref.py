@@ -171,6 +171,11 @@ MEANING = {
     "restoration.knowledge_noise_floor": "keep the estimated prior PSD at least at the AOCS knowledge's own white "
     "noise (σ_k² / f_k through the spline interpolation, below f_k / 2, as product.nc records them): the "
     "knowledge's error holds that noise whatever the attitude does; with restoration.knowledge_prior. Off by default (see highpass_per_axis)",
+    "restoration.knowledge_smoothing": "below the high-pass, where the restored angle is the AOCS knowledge's, "
+    "take its white noise out: a quadratic kept whole, then each DCT coefficient of the knowledge samples' rest "
+    "shrunk by the empirical Wiener gain max(0, 1 − σ_k² / P̄) (P̄: the power of five neighbouring coefficients; "
+    "σ_k as product.nc records it); the predicted σ counts the error it leaves. On by default (phr_cmg "
+    "0.0238 / 0.0273 → see README); a product that does not record its knowledge's noise is not smoothed",
     "restoration.highpass_per_axis": "with highpass_hz = \"auto\": an axis whose images beat the knowledge's noise "
     "below the default high-pass (its crossover, as for the quarter rule) takes its crossover as its own "
     "high-pass unless its differentials showed more power there than the knowledge's ceiling lets the attitude "

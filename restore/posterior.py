@@ -70,6 +70,7 @@ from scipy.fft import irfft, next_fast_len, rfft
 from scipy.interpolate import CubicSpline
 from scipy.ndimage import uniform_filter1d
 
+from .knowledge_smoothing import lowband
 from .synthesis import highpass_gain, highpass_nan
 
 __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", "simulated_differentials",
@@ -526,7 +527,8 @@ def knowledge_noise_below(n: int, dt: float, highpass_hz: float, noise_rad: floa
 
 def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: int = 31,
                     check_noise: bool = True, knowledge_noise_rad: float = 0.0,
-                    knowledge_rate_hz: float | None = None, shared_bands: bool = True) -> PosteriorSigma:
+                    knowledge_rate_hz: float | None = None, shared_bands: bool = True,
+                    knowledge_smoothing=None) -> PosteriorSigma:
     """Predicted 1-σ per line of one axis's restored angle (see the module's docstring).
 
     Parameters
@@ -549,6 +551,10 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
         The AOCS knowledge's white noise per sample and its rate (as the
         product records them): what of it lies below the high-pass stays in
         the restored angle. 0 / None: not counted.
+    knowledge_smoothing : restore.knowledge_smoothing.KnowledgeSmoothing, optional
+        The shrinkage the knowledge below the high-pass went through (its
+        times from the record's first line): what it leaves of the noise is
+        counted instead (:meth:`~restore.knowledge_smoothing.KnowledgeSmoothing.error_draw`).
 
     Returns
     -------
@@ -557,6 +563,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     d, valid, n, dt, taus, lags, freq, psd, ext = _draw_setup(record, samples)
     noise = noise_per_line(record)
     rng = np.random.default_rng(seed)
+    krng = _knowledge_rng(seed)
 
     def run(colour, k: int, check: bool, shared=None):
         errs, resid = [], []
@@ -564,7 +571,8 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
             th, ref = _prior_and_reference(record, freq, psd, ext, rng)
             ds = simulated_differentials(th, taus, lags, valid, dt) + correlated_noise(noise, colour, shared, dt, rng)
             est = record.rerun(ds, first_stage_gcv=False)
-            errs.append(_draw_error(record, est, ref, rng, knowledge_noise_rad, knowledge_rate_hz))
+            errs.append(_draw_error(record, est, ref, krng, knowledge_noise_rad, knowledge_rate_hz,
+                                    knowledge_smoothing))
             if check:
                 resid.append(band_power(fit_residuals(ds, est, taus, lags, dt, highpass_hz=record.highpass_hz),
                                         edges))
@@ -620,11 +628,23 @@ def _prior_and_reference(record, freq, psd, ext: int, rng) -> tuple:
     return th, th[:n]
 
 
+def _knowledge_rng(seed: int) -> np.random.Generator:
+    """The draws of the AOCS knowledge's noise: a stream of their own, so that how the knowledge is counted
+    (raw, smoothed, not at all) leaves the attitude and noise draws — and the noise colour their check
+    measures, which the colour weighting integrates with — the same bytes."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), 0x4B4E]))
+
+
 def _draw_error(record, est: np.ndarray, ref: np.ndarray, rng, knowledge_noise_rad: float,
-                knowledge_rate_hz: float | None) -> np.ndarray:
-    """A draw's error: estimate − reference, plus the knowledge noise below the high-pass, mean removed."""
+                knowledge_rate_hz: float | None, knowledge_smoothing=None) -> np.ndarray:
+    """A draw's error: estimate − reference, plus the knowledge noise below the high-pass (what its smoothing
+    leaves of it, with ``knowledge_smoothing``), mean removed."""
     e = est - ref
-    if knowledge_noise_rad > 0 and knowledge_rate_hz:
+    if knowledge_smoothing is not None:
+        dt = float(record.line_period_s)
+        e = e + lowband(knowledge_smoothing.error_draw(rng), knowledge_smoothing.time, np.arange(e.size) * dt,
+                        line_period_s=dt, highpass_hz=record.highpass_hz)
+    elif knowledge_noise_rad > 0 and knowledge_rate_hz:
         e = e + knowledge_noise_below(e.size, float(record.line_period_s), record.highpass_hz, knowledge_noise_rad,
                                       knowledge_rate_hz, rng)
     ok = np.isfinite(e)
@@ -632,7 +652,8 @@ def _draw_error(record, est: np.ndarray, ref: np.ndarray, rng, knowledge_noise_r
 
 
 def local_error_sigma(record, local: np.ndarray, *, samples: int = 8, seed: int = 0, smooth_lines: int = 31,
-                      knowledge_noise_rad: float = 0.0, knowledge_rate_hz: float | None = None) -> PosteriorSigma:
+                      knowledge_noise_rad: float = 0.0, knowledge_rate_hz: float | None = None,
+                      knowledge_smoothing=None) -> PosteriorSigma:
     """Predicted 1-σ per line with the *measured* local matching error as the pairs' noise.
 
     ``local`` (pair, line) [rad] is the local part of each pair's
@@ -656,6 +677,7 @@ def local_error_sigma(record, local: np.ndarray, *, samples: int = 8, seed: int 
     x = np.where(valid, np.nan_to_num(loc), 0.0)
     spec = rfft(x - x.mean(axis=1, keepdims=True), axis=-1)
     rng = np.random.default_rng(seed)
+    krng = _knowledge_rng(seed)
     errs = []
     for _ in range(samples):
         th, ref = _prior_and_reference(record, freq, psd, ext, rng)
@@ -663,7 +685,7 @@ def local_error_sigma(record, local: np.ndarray, *, samples: int = 8, seed: int 
         phase[0] = 0.0
         noise = np.where(valid, irfft(spec * phase, n=n, axis=-1), np.nan)
         est = record.rerun(simulated_differentials(th, taus, lags, valid, dt) + noise, first_stage_gcv=False)
-        errs.append(_draw_error(record, est, ref, rng, knowledge_noise_rad, knowledge_rate_hz))
+        errs.append(_draw_error(record, est, ref, krng, knowledge_noise_rad, knowledge_rate_hz, knowledge_smoothing))
     errs = np.array(errs)
     return PosteriorSigma(sigma=np.sqrt(_line_variance(errs, smooth_lines)), noise_scale=1.0, samples=int(samples),
                           detrended_rms=detrended_rms(errs),

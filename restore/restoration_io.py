@@ -203,6 +203,11 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
                                              "coverage": res.coverage[a]})
         data[f"knowledge_{a}"] = ("time", res.knowledge[a], {"units": "rad"})
         data[f"correction_{a}"] = ("time", res.correction[a], {"units": "rad"})
+        if a in res.knowledge_smoothing:
+            data[f"knowledge_smoothing_{a}"] = (
+                "time", res.knowledge_smoothing[a],
+                {"units": "rad", "long_name": f"part of correction_{a} that smooths the AOCS knowledge's noise below "
+                                              "the high-pass (restore.knowledge_smoothing)"})
     names = [p.name for p in res.pairs]
     for k, a in enumerate(AXES):
         data[f"diff_{a}"] = (("pair", "time"), np.stack([p.synthesis.diff[:, k] for p in res.pairs]),
@@ -340,7 +345,9 @@ def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult
         band_shares={a: json.loads(ds[f"sigma_{a}"].attrs.get("band_noise_shares", "{}")) for a in AXES
                      if f"sigma_{a}" in ds.variables},
         yaw_pitch_coupling=float(ds.attrs.get("yaw_pitch_coupling", 0.0)),
-        yaw_roll_coupling=float(ds.attrs.get("yaw_roll_coupling", 0.0)))
+        yaw_roll_coupling=float(ds.attrs.get("yaw_roll_coupling", 0.0)),
+        knowledge_smoothing={a: _values(ds, f"knowledge_smoothing_{a}") for a in AXES
+                             if f"knowledge_smoothing_{a}" in ds.variables})
 
 
 def read_restoration(path: str | Path, *, product_time: np.ndarray | None = None):

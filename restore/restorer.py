@@ -121,7 +121,9 @@ class Restorer:
             flag_limits: dict = {}
             estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad,
                                                       flag_limits)
-            correction = stages.remove_mean(estimate, s.axes)
+            smoothing = stages.knowledge_smoothing_correction(
+                product, stages.knowledge_smoothings(product, s, s.axes), records)
+            correction = stages.remove_mean({a: estimate[a] + smoothing.get(a, 0.0) for a in AXES}, s.axes)
             restored = {a: knowledge[a] + correction[a] for a in AXES}
             anchored = False
             if s.anchor_star_tracker:
@@ -157,7 +159,8 @@ class Restorer:
                                  band_shares={a: ps.band_shares for a, ps in sigma.items()},
                                  detrended_rms={a: detrended_rms_over(ps, restored[a]) for a, ps in sigma.items()},
                                  yaw_pitch_coupling=stages.yaw_pitch_coupling(pairs),
-                                 yaw_roll_coupling=stages.yaw_coupling(pairs, "roll"))
+                                 yaw_roll_coupling=stages.yaw_coupling(pairs, "roll"),
+                                 knowledge_smoothing=smoothing)
 
     def _settings_for(self, product: Product) -> RestorationSettings:
         """The settings the product decides: the "auto" high-pass (from the AOCS knowledge's cut-off) and

@@ -141,6 +141,9 @@ class RestorationResult:
     #: across-track motion of a yaw relative to a roll (≈ sin of the along-track tilt): the restored roll is
     #: roll + this × the yaw the AOCS knowledge misses (:func:`restore.stages.yaw_coupling`)
     yaw_roll_coupling: float = 0.0
+    #: per restored axis: what the smoothing of the AOCS knowledge below the high-pass added to the correction
+    #: [rad] (:mod:`restore.knowledge_smoothing`); empty when it was off or not recorded
+    knowledge_smoothing: dict = field(default_factory=dict)
 
     def yaw_coupling(self, axis: str) -> float:
         """The yaw seen as ``axis`` per radian of missed yaw (0 for yaw or an axis without one)."""

@@ -25,6 +25,7 @@ from .matching import match_points, support_margin
 from .method_choice import predicted_differential, resolve_method
 from .observability import observability
 from .knowledge_prior import knowledge_noise_floor, knowledge_psd_ceiling
+from .knowledge_smoothing import knowledge_smoothing, lowband_correction
 from .line_weights import gap_distance, residual_weight_factors, window_stretch
 from .local_noise import local_matching_error
 from .posterior import fit_residuals, larger_sigma, local_error_sigma, posterior_sigma
@@ -43,7 +44,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "predicted_sigma", "raise_by_local_error", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "knowledge_smoothings", "knowledge_smoothing_correction", "predicted_sigma", "raise_by_local_error", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -818,6 +819,37 @@ def colour_weighted(record: IntegrationRecord, colour, ceiling=None) -> Integrat
     return replace(weighted, increment=weighted.rerun())
 
 
+def knowledge_smoothings(product: Product, settings: RestorationSettings, axes) -> dict:
+    """``{axis: KnowledgeSmoothing}`` of the AOCS knowledge samples of ``axes`` (times from the record's first
+    line; :mod:`restore.knowledge_smoothing`); empty with ``knowledge_smoothing`` off or a product that does
+    not record its knowledge's noise, and an axis with too few samples is left out."""
+    if not settings.knowledge_smoothing or product.knowledge_noise is None:
+        return {}
+    noise_rad, _ = product.knowledge_noise
+    kn = product.knowledge
+    t = np.asarray(kn.time, dtype=np.float64) - float(product.time[0])
+    out = {}
+    for a in axes:
+        sm = knowledge_smoothing(t, getattr(kn, a), noise_rad)
+        if sm is not None:
+            out[a] = sm
+    return out
+
+
+def knowledge_smoothing_correction(product: Product, smoothings: dict, records: dict) -> dict:
+    """``{axis: (line,)}`` to add to the correction so that the restored angle's band below each axis's
+    high-pass is the smoothed knowledge's (:func:`restore.knowledge_smoothing.lowband_correction`) [rad]."""
+    t = np.asarray(product.time, dtype=np.float64)
+    out = {}
+    for a, sm in smoothings.items():
+        rec = records.get(a)
+        if rec is None:
+            continue
+        out[a] = lowband_correction(sm, getattr(product.knowledge, a), t - t[0], line_period_s=float(t[1] - t[0]),
+                                    highpass_hz=float(rec.highpass_hz))
+    return out
+
+
 def predicted_sigma(records: dict, product: Product, settings: RestorationSettings) -> dict:
     """Predicted 1-σ per line of each restored axis [rad] (:func:`restore.posterior.posterior_sigma`).
 
@@ -830,8 +862,9 @@ def predicted_sigma(records: dict, product: Product, settings: RestorationSettin
         return {}
     noise, rate = product.knowledge_noise or (0.0, None)
     order = sorted(set(settings.axes) | set(records))
+    smooth = knowledge_smoothings(product, settings, records)
     return {a: posterior_sigma(rec, samples=settings.posterior_samples, seed=order.index(a),
-                               knowledge_noise_rad=noise, knowledge_rate_hz=rate)
+                               knowledge_noise_rad=noise, knowledge_rate_hz=rate, knowledge_smoothing=smooth.get(a))
             for a, rec in sorted(records.items())}
 
 
@@ -847,6 +880,7 @@ def raise_by_local_error(sigma: dict, records: dict, pairs: list, product: Produ
     local = local_errors(pairs, settings, product.time.size) if todo else {}
     noise, rate = product.knowledge_noise or (0.0, None)
     order = sorted(set(settings.axes) | set(records))
+    smooth = knowledge_smoothings(product, settings, todo)
     out = dict(sigma)
     for a in todo:
         rec = records[a]
@@ -855,7 +889,8 @@ def raise_by_local_error(sigma: dict, records: dict, pairs: list, product: Produ
         measured = np.array([local[p][:, AXES.index(a)] for p in rec.pairs])
         out[a] = larger_sigma(sigma[a], local_error_sigma(rec, measured, samples=settings.posterior_samples,
                                                           seed=order.index(a), knowledge_noise_rad=noise,
-                                                          knowledge_rate_hz=rate))
+                                                          knowledge_rate_hz=rate,
+                                                          knowledge_smoothing=smooth.get(a)))
     return out
 
 

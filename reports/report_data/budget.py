@@ -414,7 +414,11 @@ class _AxisBudget:
         dperfect = self.dlag if self.dlag is not None else self.dtrue
         th_true = rec.rerun(dperfect)
         remaining = att[f"delta_{a}"] - (self.prev_used if self.prev_used is not None else 0.0)
-        eint = _centred(np.where(mask, th_true - remaining, np.nan))
+        # the smoothing of the knowledge's noise below the high-pass is part of what the integration step gives
+        smooth_name = f"knowledge_smoothing_{a}"
+        smoothed = smooth_name in self.run.restoration.variables
+        given = th_true + (np.asarray(self.run.restoration[smooth_name].values, dtype=np.float64) if smoothed else 0.0)
+        eint = _centred(np.where(mask, given - remaining, np.nan))
         anchored = bool(int(self.run.restoration.attrs.get("anchored_on_star_tracker", 0)))
         total = _centred(att[f"restored_{a}"] - att[f"true_{a}"])
         eanc = None
@@ -448,6 +452,7 @@ class _AxisBudget:
             ser["local matching error"] = el
         rows.append(r_meas)
         rows.append(_stats_row("integration", a, eint, ifov, "integrate(true differentials) − truth"
+                               + (" (the knowledge's noise below the high-pass smoothed)" if smoothed else "")
                                + (", its trend removed (the star-tracker anchoring sets it)" if anchored else "")))
         if eanc is not None:
             rows.append(_stats_row("star-tracker anchoring", a, eanc, ifov,

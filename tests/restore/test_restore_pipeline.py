@@ -421,7 +421,9 @@ def test_the_local_matching_error_raises_the_predicted_sigma_where_larger(tiny_r
     run = tmp_path / "tiny"
     shutil.copytree(d, run)
     off = restore_run(run, progress=False, overrides={"sigma_local_error": False, "correct_images": False})
-    noise, rate = read_product(run).knowledge_noise or (0.0, None)
+    product = read_product(run)
+    noise, rate = product.knowledge_noise or (0.0, None)
+    smoothing = stages.knowledge_smoothings(product, on.settings, on.settings.axes)
     local = stages.local_errors(on.pairs, on.settings, on.time.size)
     assert set(local) == {p.name for p in on.pairs}
     order = sorted(set(on.settings.axes) | set(on.integration))
@@ -430,7 +432,8 @@ def test_the_local_matching_error_raises_the_predicted_sigma_where_larger(tiny_r
         k = ["roll", "pitch", "yaw"].index(a)
         ps = local_error_sigma(rec, np.array([local[p][:, k] for p in rec.pairs]),
                                samples=on.settings.posterior_samples, seed=order.index(a),
-                               knowledge_noise_rad=noise, knowledge_rate_hz=rate)
+                               knowledge_noise_rad=noise, knowledge_rate_hz=rate,
+                               knowledge_smoothing=smoothing.get(a))
         assert np.isfinite(ps.sigma).sum() > 0.9 * np.isfinite(s_on).sum()
         both = np.isfinite(s_on) & np.isfinite(off.sigma[a]) & np.isfinite(ps.sigma)
         assert both.sum() > 0.9 * np.isfinite(s_on).sum()
@@ -714,3 +717,31 @@ def test_a_trend_in_the_truth_is_named_as_unobservable_and_leaves_the_rest_uncha
     assert after["trend_rms"] / px > 0.25 and abs(after["outside_rms"] - before["outside_rms"]) / px < 1e-4
     line = unobservable_line(D.load_run(run), ["roll", "pitch"])
     assert "without what no pair sees" in line and f"pitch {after['outside_rms'] / px:.3f} px" in line
+
+
+def test_the_knowledge_below_the_highpass_is_smoothed_and_recorded(tiny_restored, tmp_path):
+    """The correction is the integration's estimate plus the smoothing of the knowledge's low band, recorded in
+    restoration.nc and recomputed from the product alone; off, the correction is the estimate."""
+    from restore import stages
+    from simsat.product import read_product
+
+    d, res = tiny_restored
+    ds = xr.load_dataset(d / "restoration.nc")
+    product = read_product(d)
+    smooth = stages.knowledge_smoothing_correction(
+        product, stages.knowledge_smoothings(product, res.settings, res.settings.axes), res.integration)
+    for a in res.settings.axes:
+        sm = np.asarray(ds[f"knowledge_smoothing_{a}"].values)
+        np.testing.assert_allclose(sm, smooth[a], rtol=0, atol=1e-15)
+        assert 0 < np.std(sm) < np.std(ds[f"knowledge_{a}"].values)
+        rec = res.integration[a]
+        est = rec.previous + rec.increment
+        ok = np.isfinite(ds[f"correction_{a}"].values)
+        x = ds[f"correction_{a}"].values[ok] - sm[ok] - est[ok]
+        np.testing.assert_allclose(x - x.mean(), 0.0, atol=1e-12)
+    run = tmp_path / "tiny"
+    shutil.copytree(d, run)
+    off = restore_run(run, progress=False, overrides={"knowledge_smoothing": False, "posterior_samples": 0,
+                                                      "correct_images": False})
+    assert off.knowledge_smoothing == {}
+    assert not any(v.startswith("knowledge_smoothing") for v in xr.load_dataset(run / "restoration.nc").variables)
