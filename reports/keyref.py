@@ -176,6 +176,9 @@ MEANING = {
     "shrunk by the empirical Wiener gain max(0, 1 − σ_k² / P̄) (P̄: the power of five neighbouring coefficients; "
     "σ_k as product.nc records it); the predicted σ counts the error it leaves. On by default (phr_cmg "
     "0.0238 / 0.0273 → see README); a product that does not record its knowledge's noise is not smoothed",
+    "restoration.deconvolve_exposure": "undo the line's exposure (the line period, centred on the line time) on "
+    "the restored angle: the images see the attitude averaged over it, a gain sinc(f T) on the vibration (0.994 at "
+    "150 Hz for 0.4 ms); the estimate is multiplied by its inverse to second order (a three-tap filter). On by default",
     "restoration.highpass_per_axis": "with highpass_hz = \"auto\": an axis whose images beat the knowledge's noise "
     "below the default high-pass (its crossover, as for the quarter rule) takes its crossover as its own "
     "high-pass unless its differentials showed more power there than the knowledge's ceiling lets the attitude "

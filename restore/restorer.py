@@ -121,6 +121,7 @@ class Restorer:
             flag_limits: dict = {}
             estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad,
                                                       flag_limits)
+            estimate = stages.undo_exposure(estimate, product, s)
             smoothing = stages.knowledge_smoothing_correction(
                 product, stages.knowledge_smoothings(product, s, s.axes), records)
             correction = stages.remove_mean({a: estimate[a] + smoothing.get(a, 0.0) for a in AXES}, s.axes)

@@ -25,6 +25,7 @@ from .matching import match_points, support_margin
 from .method_choice import predicted_differential, resolve_method
 from .observability import observability
 from .knowledge_prior import knowledge_noise_floor, knowledge_psd_ceiling
+from .exposure import exposure_deconvolution
 from .knowledge_smoothing import knowledge_smoothing, lowband_correction
 from .line_weights import gap_distance, residual_weight_factors, window_stretch
 from .local_noise import local_matching_error
@@ -44,7 +45,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "knowledge_smoothings", "knowledge_smoothing_correction", "predicted_sigma", "raise_by_local_error", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "raise_by_local_error", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -848,6 +849,20 @@ def knowledge_smoothing_correction(product: Product, smoothings: dict, records: 
         out[a] = lowband_correction(sm, getattr(product.knowledge, a), t - t[0], line_period_s=float(t[1] - t[0]),
                                     highpass_hz=float(rec.highpass_hz))
     return out
+
+
+def undo_exposure(estimate: dict, product: Product, settings: RestorationSettings) -> dict:
+    """The estimate of each restored axis with its line's exposure (the line period) undone
+    (:func:`restore.exposure.exposure_deconvolution`); unchanged with ``deconvolve_exposure`` off."""
+    if not settings.deconvolve_exposure:
+        return estimate
+    t = np.asarray(product.time, dtype=np.float64)
+    if t.size < 3:
+        return estimate
+    exposure = float(product.ds.attrs["line_period_s"])
+    dt = float(np.median(np.diff(t)))
+    return {a: exposure_deconvolution(v, dt=dt, exposure_s=exposure) if a in settings.axes else v
+            for a, v in estimate.items()}
 
 
 def predicted_sigma(records: dict, product: Product, settings: RestorationSettings) -> dict:

@@ -720,8 +720,9 @@ def test_a_trend_in_the_truth_is_named_as_unobservable_and_leaves_the_rest_uncha
 
 
 def test_the_knowledge_below_the_highpass_is_smoothed_and_recorded(tiny_restored, tmp_path):
-    """The correction is the integration's estimate plus the smoothing of the knowledge's low band, recorded in
-    restoration.nc and recomputed from the product alone; off, the correction is the estimate."""
+    """The correction is the integration's estimate (its exposure undone) plus the smoothing of the knowledge's
+    low band, recorded in
+    restoration.nc and recomputed from the product alone; off, no smoothing is recorded."""
     from restore import stages
     from simsat.product import read_product
 
@@ -735,7 +736,7 @@ def test_the_knowledge_below_the_highpass_is_smoothed_and_recorded(tiny_restored
         np.testing.assert_allclose(sm, smooth[a], rtol=0, atol=1e-15)
         assert 0 < np.std(sm) < np.std(ds[f"knowledge_{a}"].values)
         rec = res.integration[a]
-        est = rec.previous + rec.increment
+        est = stages.undo_exposure({a: rec.previous + rec.increment}, product, res.settings)[a]
         ok = np.isfinite(ds[f"correction_{a}"].values)
         x = ds[f"correction_{a}"].values[ok] - sm[ok] - est[ok]
         np.testing.assert_allclose(x - x.mean(), 0.0, atol=1e-12)
