@@ -175,7 +175,7 @@ MEANING = {
     "take its white noise out: a quadratic kept whole, then each DCT coefficient of the knowledge samples' rest "
     "shrunk by the empirical Wiener gain max(0, 1 − σ_k² / P̄) (P̄: the power of five neighbouring coefficients; "
     "σ_k as product.nc records it); the predicted σ counts the error it leaves. On by default (phr_cmg "
-    "0.0238 / 0.0273 → see README); a product that does not record its knowledge's noise is not smoothed",
+    "0.0238 / 0.0273 → 0.0178 / 0.0220 px); a product that does not record its knowledge's noise is not smoothed",
     "restoration.deconvolve_exposure": "undo the line's exposure (the line period, centred on the line time) on "
     "the restored angle: the images see the attitude averaged over it, a gain sinc(f T) on the vibration (0.994 at "
     "150 Hz for 0.4 ms); the estimate is multiplied by its inverse to second order (a three-tap filter). On by default",
