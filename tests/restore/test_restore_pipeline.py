@@ -460,12 +460,16 @@ def test_posterior_samples_zero_writes_no_sigma_and_one_is_refused(tiny_restored
 
 def test_recorded_lags_are_the_inliers_line_residuals_and_were_integrated_with(tiny_restored):
     """Time synchronisation: the lag of each line is the mean line residual of its inliers (computed here
-    from the recorded matches), and the correction is the integration *with* those lags: integrating the
-    same differentials without them gives a clearly different correction."""
+    from the recorded matches), and the correction is the integration *with* those lags (its exposure undone,
+    the knowledge's smoothed low band added): integrating the same differentials without them gives a clearly
+    different correction."""
+    from restore import stages
     from restore.restoration_io import read_restoration
+    from simsat.product import read_product
 
     d, _ = tiny_restored
     res = read_restoration(d / "restoration.nc")
+    product = read_product(d)
     te = res.integration["roll"].line_period_s
     n = res.time.size
     for j, p in enumerate(res.pairs):
@@ -486,7 +490,9 @@ def test_recorded_lags_are_the_inliers_line_residuals_and_were_integrated_with(t
         assert _rms(same - rec.increment) < 1e-3 * _rms(ref)
         without = replace_lags(rec, 0.0).rerun()
         assert _rms(without - rec.increment) > 20 * _rms(same - rec.increment) + 1e-3 * _rms(ref), a
-        c = np.where(np.isfinite(res.correction[a]), rec.previous + rec.increment, np.nan)
+        # the correction: that integration, its exposure undone, plus the knowledge's smoothed low band
+        est = stages.undo_exposure({a: rec.previous + rec.increment}, product, res.settings)[a]
+        c = np.where(np.isfinite(res.correction[a]), est + res.knowledge_smoothing.get(a, 0.0), np.nan)
         c = c - np.nanmean(c)
         np.testing.assert_allclose(c, res.correction[a], atol=1e-12 * np.nanmax(np.abs(c)) + 1e-18)
 
