@@ -50,7 +50,13 @@ pair's noise that is a shared band's is measured from the real residuals
 (:func:`correlated_noise`).
 
 Below the high-pass, the AOCS knowledge's own noise (recorded in the product)
-adds ``σ_k² · 2 f_hp / f_k`` (white noise at the knowledge rate ``f_k``).
+adds ``σ_k² · 2 f_hp / f_k`` (white noise at the knowledge rate ``f_k``), or
+what its smoothing leaves of it. Above it, the attitude error the integration
+restores, ``θ − k``, holds that noise too whatever the attitude does: the
+draws take it from the prior raised to the knowledge's white noise
+(:func:`draw_psd`), so that where the estimated prior fell below it (nothing
+seen there beyond the differentials' noise) the noise the filter leaves in the
+restored angle is predicted rather than counted as zero.
 
 A second prediction needs no model of the noise: the local part of the
 matching error is measured by fitting the differentials again from two
@@ -70,13 +76,14 @@ from scipy.fft import irfft, next_fast_len, rfft
 from scipy.interpolate import CubicSpline
 from scipy.ndimage import uniform_filter1d
 
+from .knowledge_prior import knowledge_noise_floor
 from .knowledge_smoothing import lowband
 from .synthesis import highpass_gain, highpass_nan
 
 __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", "simulated_differentials",
            "fit_residual_rms", "fit_residuals", "band_power", "noise_colour_from_check", "noise_colour_estimate",
            "coloured_noise",
-           "knowledge_noise_below", "pair_bands", "SharedBandNoise", "shared_band_noise", "correlated_noise",
+           "knowledge_noise_below", "draw_psd", "pair_bands", "SharedBandNoise", "shared_band_noise", "correlated_noise",
            "detrended", "detrended_rms", "detrended_rms_over", "local_error_sigma", "larger_sigma"]
 
 
@@ -560,7 +567,8 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     -------
     PosteriorSigma
     """
-    d, valid, n, dt, taus, lags, freq, psd, ext = _draw_setup(record, samples)
+    d, valid, n, dt, taus, lags, freq, psd, ext = _draw_setup(record, samples, knowledge_noise_rad,
+                                                              knowledge_rate_hz)
     noise = noise_per_line(record)
     rng = np.random.default_rng(seed)
     krng = _knowledge_rng(seed)
@@ -601,9 +609,13 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
                           colour_estimate=estimate)
 
 
-def _draw_setup(record, samples: int) -> tuple:
+def _draw_setup(record, samples: int, knowledge_noise_rad: float = 0.0, knowledge_rate_hz: float | None = None
+                ) -> tuple:
     """What the Monte Carlo draws of a record need: (diffs, valid, lines, Δt, delays, per-line lags, prior
-    frequencies, prior PSD, lines drawn: the record plus the longest delay and lag)."""
+    frequencies, PSD the attitudes are drawn from, lines drawn: the record plus the longest delay and lag).
+
+    The draws' PSD is the record's prior raised to the AOCS knowledge's own white noise where that is
+    known (:func:`draw_psd`)."""
     if samples < 2:
         raise ValueError(f"samples: must be >= 2, got {samples}")
     d = np.asarray(record.diffs, dtype=np.float64)
@@ -613,8 +625,27 @@ def _draw_setup(record, samples: int) -> tuple:
     # is a good part of the total
     lags = [np.nan_to_num(np.asarray(lg, dtype=np.float64)) for lg in record.lags_s]
     freq, psd = _prior(record)
+    psd = draw_psd(freq, psd, knowledge_noise_rad, knowledge_rate_hz)
     ext = n + int(np.ceil((max(taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
     return d, np.isfinite(d), n, dt, taus, lags, freq, psd, ext
+
+
+def draw_psd(freq, psd, knowledge_noise_rad: float = 0.0, knowledge_rate_hz: float | None = None) -> np.ndarray:
+    """The PSD the draws take the remaining attitude error from [rad²/Hz, two-sided]: the integration's prior,
+    at least the AOCS knowledge's own white noise (:func:`restore.knowledge_prior.knowledge_noise_floor`).
+
+    What the integration restores is ``θ − k``, the knowledge's error, and that error holds the knowledge's
+    noise whatever the attitude does. A prior estimated below it (the differentials showed nothing there
+    beyond their noise, or a ceiling from the knowledge's filter clipped it) makes the filter leave that noise
+    in the restored angle; drawing the attitude from the prior alone would predict that error as zero. The
+    filter itself is not changed (``restoration.knowledge_noise_floor`` does that): only what its error is
+    predicted on. Without a recorded noise (0 or no rate) the prior is returned as it is.
+    """
+    psd = np.asarray(psd, dtype=np.float64)
+    if not (knowledge_noise_rad > 0 and knowledge_rate_hz):
+        return psd
+    return np.maximum(psd, knowledge_noise_floor(freq, rate_hz=float(knowledge_rate_hz),
+                                                 noise_rad=float(knowledge_noise_rad)))
 
 
 def _prior_and_reference(record, freq, psd, ext: int, rng) -> tuple:
@@ -670,7 +701,8 @@ def local_error_sigma(record, local: np.ndarray, *, samples: int = 8, seed: int 
     see an error that moves like an attitude, the local one does not hold an
     error every point of a line shares. :func:`larger_sigma` keeps the larger.
     """
-    d, valid, n, dt, taus, lags, freq, psd, ext = _draw_setup(record, samples)
+    d, valid, n, dt, taus, lags, freq, psd, ext = _draw_setup(record, samples, knowledge_noise_rad,
+                                                              knowledge_rate_hz)
     loc = np.asarray(local, dtype=np.float64)
     if loc.shape != d.shape:
         raise ValueError(f"local: shape {loc.shape}, expected the record's (pair, line) {d.shape}")

@@ -3,9 +3,11 @@ import numpy as np
 import pytest
 
 from restore.axis_integration import PriorSpectrum
+from restore.knowledge_prior import spline_response
 from restore.observability import observability
 from restore.posterior import (
     detrended_rms,
+    draw_psd,
     fit_residual_rms,
     knowledge_noise_below,
     noise_per_line,
@@ -388,3 +390,56 @@ def test_auto_flags_follow_the_models_sigma_when_the_local_error_raised_it():
     assert flagged["roll"][:5].all() and not flagged["roll"][5:].any()
     _, flagged = flag_uncertain({"roll": np.zeros(100)}, {"roll": both}, 1.5, 1.0)
     assert flagged["roll"].all()
+
+
+def _record_with_knowledge_noise(seed, noise_rad, rate_hz):
+    """As :func:`_record`, the remaining error also holding the AOCS knowledge's white noise (``noise_rad`` per
+    sample at ``rate_hz``, spline-interpolated) that the filter's prior (the coloured band alone) leaves out."""
+    from scipy.interpolate import CubicSpline
+
+    f = np.fft.rfftfreq(8192, DT)
+    psd = _coloured_psd(f)
+    rng = np.random.default_rng(seed)
+    th = prior_draw(f, psd, N + 80, DT, rng)
+    ts = (np.arange(int((N + 80) * DT * rate_hz) + 6) - 2) / rate_hz
+    th = th + CubicSpline(ts, rng.standard_normal(ts.size) * noise_rad)(np.arange(N + 80) * DT)
+    valid, lags = np.ones((3, N), bool), np.zeros((3, N))
+    d = simulated_differentials(th, TAUS, lags, valid, DT) + 0.3e-6 * rng.standard_normal((3, N))
+    rec = IntegrationRecord(axis="roll", pairs=["a/b", "b/c", "a/c"], diffs=d, sigmas=np.full((3, N), 0.3e-6),
+                            taus=np.array(TAUS), lags_s=lags, weights=np.ones((3, N)), line_period_s=DT,
+                            method="wiener", options={}, highpass_hz=0.0,
+                            spectrum=PriorSpectrum(f, psd, np.full(3, 0.3e-6)), increment=np.zeros(N),
+                            previous=np.zeros(N))
+    rec.increment = rec.rerun()
+    return rec, th
+
+
+def test_sigma_counts_the_knowledge_noise_the_prior_left_out():
+    """The remaining error holds the knowledge's white noise whatever the prior says: where the prior is below it
+    (here 0 below 10 Hz) the filter leaves it, and the draws taken from the prior raised to that floor
+    (:func:`restore.posterior.draw_psd`) predict the spread of actual errors; from the prior alone, a fraction."""
+    kn, kr = 0.5e-6, 64.0
+    rec, _ = _record_with_knowledge_noise(5, kn, kr)
+    with_k = posterior_sigma(rec, samples=24, seed=7, check_noise=False, knowledge_noise_rad=kn, knowledge_rate_hz=kr)
+    without = posterior_sigma(rec, samples=24, seed=7, check_noise=False)
+    errs = []
+    for s in range(12):
+        r, th = _record_with_knowledge_noise(100 + s, kn, kr)
+        e = r.increment - th[:N]
+        errs.append(e - np.mean(e))
+    actual = np.sqrt(np.mean(np.array(errs) ** 2))
+    assert np.sqrt(np.nanmean(with_k.sigma ** 2)) == pytest.approx(actual, rel=0.15)
+    assert np.sqrt(np.nanmean(without.sigma ** 2)) < 0.3 * actual
+
+
+def test_draw_psd_is_the_prior_raised_to_the_knowledges_white_noise():
+    f = np.linspace(0.0, 100.0, 1001)
+    prior = np.where(f > 20.0, 1e-13, 0.0)
+    out = draw_psd(f, prior, 0.3e-6, 64.0)
+    floor = (0.3e-6) ** 2 / 64.0 * spline_response(f, 64.0) ** 2
+    below = f <= 32.0
+    np.testing.assert_allclose(out[below], np.maximum(prior, floor)[below])
+    np.testing.assert_array_equal(out[~below], prior[~below])   # no noise above the knowledge's Nyquist
+    assert out[0] == pytest.approx(0.3e-6 ** 2 / 64.0)
+    np.testing.assert_array_equal(draw_psd(f, prior, 0.0, 64.0), prior)
+    np.testing.assert_array_equal(draw_psd(f, prior, 0.3e-6, None), prior)
