@@ -83,7 +83,8 @@ from .synthesis import highpass_gain, highpass_nan
 __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", "simulated_differentials",
            "fit_residual_rms", "fit_residuals", "band_power", "noise_colour_from_check", "noise_colour_estimate",
            "coloured_noise",
-           "knowledge_noise_below", "draw_psd", "pair_bands", "SharedBandNoise", "shared_band_noise", "correlated_noise",
+           "knowledge_noise_below", "draw_psd", "pair_bands", "SharedBandNoise", "shared_band_noise",
+           "correlated_noise",
            "detrended", "detrended_rms", "detrended_rms_over", "local_error_sigma", "larger_sigma"]
 
 
