@@ -35,13 +35,21 @@ def _coloured_psd(f, rms=2e-6, corner=40.0, band=(10.0, 120.0)):
     return shape * rms ** 2 / (2 * shape.sum() * df)
 
 
-def _record(valid=None, noise=0.3e-6, seed=1, weights=None, noise_true=None, noise_colour=None):
+def _record(valid=None, noise=0.3e-6, seed=1, weights=None, noise_true=None, noise_colour=None, knowledge=None):
     """A record integrated with the frozen Wiener filter of a known prior and noise; diffs drawn from that model
-    (the true noise: ``noise_true`` per line, white or with its power shaped by ``noise_colour(f)``)."""
+    (the true noise: ``noise_true`` per line, white or with its power shaped by ``noise_colour(f)``). With
+    ``knowledge = (noise_rad, rate_hz)`` the remaining error also holds the AOCS knowledge's white noise
+    (``noise_rad`` per sample at ``rate_hz``, spline-interpolated), which the filter's prior leaves out."""
     f = np.fft.rfftfreq(8192, DT)
     psd = _coloured_psd(f)
     rng = np.random.default_rng(seed)
     th = prior_draw(f, psd, N + 80, DT, rng)
+    if knowledge is not None:
+        from scipy.interpolate import CubicSpline
+
+        noise_rad, rate_hz = knowledge
+        ts = (np.arange(int((N + 80) * DT * rate_hz) + 6) - 2) / rate_hz
+        th = th + CubicSpline(ts, rng.standard_normal(ts.size) * noise_rad)(np.arange(N + 80) * DT)
     lags = np.zeros((3, N))
     valid = np.ones((3, N), bool) if valid is None else valid
     d = simulated_differentials(th, TAUS, lags, valid, DT)
@@ -392,39 +400,17 @@ def test_auto_flags_follow_the_models_sigma_when_the_local_error_raised_it():
     assert flagged["roll"].all()
 
 
-def _record_with_knowledge_noise(seed, noise_rad, rate_hz):
-    """As :func:`_record`, the remaining error also holding the AOCS knowledge's white noise (``noise_rad`` per
-    sample at ``rate_hz``, spline-interpolated) that the filter's prior (the coloured band alone) leaves out."""
-    from scipy.interpolate import CubicSpline
-
-    f = np.fft.rfftfreq(8192, DT)
-    psd = _coloured_psd(f)
-    rng = np.random.default_rng(seed)
-    th = prior_draw(f, psd, N + 80, DT, rng)
-    ts = (np.arange(int((N + 80) * DT * rate_hz) + 6) - 2) / rate_hz
-    th = th + CubicSpline(ts, rng.standard_normal(ts.size) * noise_rad)(np.arange(N + 80) * DT)
-    valid, lags = np.ones((3, N), bool), np.zeros((3, N))
-    d = simulated_differentials(th, TAUS, lags, valid, DT) + 0.3e-6 * rng.standard_normal((3, N))
-    rec = IntegrationRecord(axis="roll", pairs=["a/b", "b/c", "a/c"], diffs=d, sigmas=np.full((3, N), 0.3e-6),
-                            taus=np.array(TAUS), lags_s=lags, weights=np.ones((3, N)), line_period_s=DT,
-                            method="wiener", options={}, highpass_hz=0.0,
-                            spectrum=PriorSpectrum(f, psd, np.full(3, 0.3e-6)), increment=np.zeros(N),
-                            previous=np.zeros(N))
-    rec.increment = rec.rerun()
-    return rec, th
-
-
 def test_sigma_counts_the_knowledge_noise_the_prior_left_out():
     """The remaining error holds the knowledge's white noise whatever the prior says: where the prior is below it
     (here 0 below 10 Hz) the filter leaves it, and the draws taken from the prior raised to that floor
     (:func:`restore.posterior.draw_psd`) predict the spread of actual errors; from the prior alone, a fraction."""
     kn, kr = 0.5e-6, 64.0
-    rec, _ = _record_with_knowledge_noise(5, kn, kr)
+    rec, _ = _record(seed=5, knowledge=(kn, kr))
     with_k = posterior_sigma(rec, samples=24, seed=7, check_noise=False, knowledge_noise_rad=kn, knowledge_rate_hz=kr)
     without = posterior_sigma(rec, samples=24, seed=7, check_noise=False)
     errs = []
     for s in range(12):
-        r, th = _record_with_knowledge_noise(100 + s, kn, kr)
+        r, th = _record(seed=100 + s, knowledge=(kn, kr))
         e = r.increment - th[:N]
         errs.append(e - np.mean(e))
     actual = np.sqrt(np.mean(np.array(errs) ** 2))
