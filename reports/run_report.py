@@ -454,6 +454,15 @@ def _budget_section(pg: _Page, run: D.RunData, integrate, max_integration_s: flo
     return bud
 
 
+def _knowledge_check_text(chk: dict, ifov: float) -> str:
+    """One cell: the band, observed / predicted power of restored − smoothed knowledge, and what σ took."""
+    if not chk:
+        return "—"
+    lo, hi = chk["band_hz"]
+    txt = f"{lo:.1f}–{hi:.1f} Hz: {chk['ratio']:.2f} × (limit {chk['threshold']:.2f})"
+    return txt + (f"; σ + {chk['excess_rms_rad'] / ifov:.4f} px in quadrature" if chk["excess_rms_rad"] > 0 else "")
+
+
 def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
     unc = D.uncertainty(run)
     if not unc:
@@ -465,9 +474,11 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
         rows.append([_e(a), _fmt(d["predicted_rms"] / ifov), _fmt(d.get("actual_rms", np.nan) / ifov),
                      _fmt(d.get("ratio", np.nan), 3), _fmt(d.get("within_2sigma", np.nan) * 100, 3),
                      str(int(d["flagged"].sum())), _fmt(d["noise_scale"], 3),
-                     _e(", ".join(f"{b} {v:.2f}" for b, v in d.get("band_shares", {}).items()) or "—")])
+                     _e(", ".join(f"{b} {v:.2f}" for b, v in d.get("band_shares", {}).items()) or "—"),
+                     _e(_knowledge_check_text(d.get("knowledge_check", {}), ifov))])
     pg.table(["axis", "predicted RMS σ [px]", "actual RMS [px]", "actual / predicted", "lines within 2σ [%]",
-              "flagged lines", "noise inflation", "band's share of its pairs' noise"], rows)
+              "flagged lines", "noise inflation", "band's share of its pairs' noise",
+              "against the smoothed knowledge"], rows)
     for a, d in unc.items():
         fig, axs = RP.uncertainty_figure()
         RP.draw_uncertainty(axs, d, a, ifov_rad=ifov)
@@ -478,7 +489,12 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
     pg.para("Lines whose predicted σ exceeds restoration.max_sigma_px (\"auto\": 3 × the axis's median) are not "
             "restored and are counted as flagged, not as valid. A ratio near 1 says the error model holds; well "
             "above 1, the error comes from something the model does not hold (a blind frequency, an unmodelled "
-            "axis, a bias): see the error budget.")
+            "axis, a bias): see the error budget. The last column checks the prediction against the AOCS "
+            "knowledge, which sees the same attitude independently: between 1.25 × the high-pass and 0.7 × the "
+            "knowledge's cut-off, the power of restored − smoothed knowledge over the sum of both predicted errors "
+            "(images: the draws above; knowledge: the noise its smoothing leaves and its filter's error). Beyond "
+            "the limit (two sampling spreads) the excess is added to σ: one of the two predictions is short by at "
+            "least that much, and the data cannot tell which.")
 
 
 def _matches_section(pg: _Page, run: D.RunData):

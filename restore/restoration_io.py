@@ -20,6 +20,7 @@ import xarray as xr
 from simsat.product import ProductError
 
 from .axis_integration import PriorSpectrum
+from .knowledge_check import KnowledgeCheck
 from .stages import sigma_limit
 from .result import IntegrationRecord, PairData, RestorationResult
 from .settings import RestorationSettings, settings_dict
@@ -246,7 +247,10 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
                                            "flag_limit_rad": float(res.flag_limits[a][0]) if a in res.flag_limits
                                            else sigma_limit(sg, res.settings.max_sigma_px, res.pixel_ifov_rad),
                                            "flag_judged_on": res.flag_limits[a][1] if a in res.flag_limits
-                                           else "reported"})
+                                           else "reported",
+                                           "knowledge_check": json.dumps(res.knowledge_checks[a].as_dict()
+                                                                         if a in res.knowledge_checks else {},
+                                                                         sort_keys=True)})
         data[f"flagged_{a}"] = ("time", np.asarray(res.flagged.get(a, np.zeros(sg.size, bool)), dtype=np.int8), {
             "long_name": f"1: {a} not restored, predicted sigma above restoration.max_sigma_px"})
     coords.update({"time": ("time", res.time, {"units": "s"}), "pair": ("pair", np.array(names))})
@@ -254,6 +258,17 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
 
 
 # --------------------------------------------------------------------------- reader
+def _knowledge_checks_from(ds) -> dict:
+    """``{axis: KnowledgeCheck}`` recorded on the ``sigma_<axis>`` variables (none in older files)."""
+    out = {}
+    for a in AXES:
+        if f"sigma_{a}" in ds.variables:
+            d = json.loads(ds[f"sigma_{a}"].attrs.get("knowledge_check", "{}") or "{}")
+            if d:
+                out[a] = KnowledgeCheck.from_dict(d)
+    return out
+
+
 def _values(ds, name, dtype=np.float64):
     return np.asarray(ds[name].values, dtype=dtype) if name in ds.variables else None
 
@@ -347,7 +362,8 @@ def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult
         yaw_pitch_coupling=float(ds.attrs.get("yaw_pitch_coupling", 0.0)),
         yaw_roll_coupling=float(ds.attrs.get("yaw_roll_coupling", 0.0)),
         knowledge_smoothing={a: _values(ds, f"knowledge_smoothing_{a}") for a in AXES
-                             if f"knowledge_smoothing_{a}" in ds.variables})
+                             if f"knowledge_smoothing_{a}" in ds.variables},
+        knowledge_checks=_knowledge_checks_from(ds))
 
 
 def read_restoration(path: str | Path, *, product_time: np.ndarray | None = None):

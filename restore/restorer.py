@@ -118,12 +118,15 @@ class Restorer:
                 bar.note("predicted σ with the local matching error (two interleaved halves of the swath)")
             sigma = stages.raise_by_local_error(sigma, records, pairs, product, s)
             timings["local_error_sigma_s"] = _time.perf_counter() - t
+            smoothings = stages.knowledge_smoothings(product, s, s.axes)
+            smoothing = stages.knowledge_smoothing_correction(product, smoothings, records)
+            sigma, checks = stages.raise_by_knowledge_check(
+                sigma, records, product, s, {a: knowledge[a] + estimate[a] + smoothing.get(a, 0.0) for a in AXES},
+                smoothings)
             flag_limits: dict = {}
             estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad,
                                                       flag_limits)
             estimate = stages.undo_exposure(estimate, product, s)
-            smoothing = stages.knowledge_smoothing_correction(
-                product, stages.knowledge_smoothings(product, s, s.axes), records)
             correction = stages.remove_mean({a: estimate[a] + smoothing.get(a, 0.0) for a in AXES}, s.axes)
             restored = {a: knowledge[a] + correction[a] for a in AXES}
             anchored = False
@@ -161,7 +164,7 @@ class Restorer:
                                  detrended_rms={a: detrended_rms_over(ps, restored[a]) for a, ps in sigma.items()},
                                  yaw_pitch_coupling=stages.yaw_pitch_coupling(pairs),
                                  yaw_roll_coupling=stages.yaw_coupling(pairs, "roll"),
-                                 knowledge_smoothing=smoothing)
+                                 knowledge_smoothing=smoothing, knowledge_checks=checks)
 
     def _settings_for(self, product: Product) -> RestorationSettings:
         """The settings the product decides: the "auto" high-pass (from the AOCS knowledge's cut-off) and

@@ -144,6 +144,9 @@ class RestorationResult:
     #: per restored axis: what the smoothing of the AOCS knowledge below the high-pass added to the correction
     #: [rad] (:mod:`restore.knowledge_smoothing`); empty when it was off or not recorded
     knowledge_smoothing: dict = field(default_factory=dict)
+    #: per axis checked: the restored angle against the smoothed knowledge
+    #: (:class:`restore.knowledge_check.KnowledgeCheck`); its ``excess_rad2`` is in ``sigma``
+    knowledge_checks: dict = field(default_factory=dict)
 
     def yaw_coupling(self, axis: str) -> float:
         """The yaw seen as ``axis`` per radian of missed yaw (0 for yaw or an axis without one)."""

@@ -53,6 +53,7 @@ class RestorationSettings:
     deconvolve_exposure: bool = True
     highpass_per_axis: bool = False
     sigma_local_error: bool = True
+    sigma_knowledge_check: bool = True
     knowledge_prior: bool = True
     rematch: int | str = "auto"
     rematch_search: tuple = (2, 2)
@@ -164,6 +165,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     if s.posterior_samples == 1:
         raise sec.error("posterior_samples", "must be 0 (no predicted σ) or >= 2 Monte Carlo draws, got 1")
     s.sigma_local_error = sec.boolean("sigma_local_error", s.sigma_local_error)
+    s.sigma_knowledge_check = sec.boolean("sigma_knowledge_check", s.sigma_knowledge_check)
     s.max_sigma_px = sec.number_or("max_sigma_px", "auto", gt=0)
     sec.finish()
     return s

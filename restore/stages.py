@@ -26,6 +26,7 @@ from .method_choice import predicted_differential, resolve_method
 from .observability import observability
 from .knowledge_prior import knowledge_noise_floor, knowledge_psd_ceiling
 from .exposure import exposure_deconvolution
+from .knowledge_check import knowledge_check, smoothed_knowledge_at
 from .knowledge_smoothing import knowledge_smoothing, lowband_correction
 from .line_weights import gap_distance, residual_weight_factors, window_stretch
 from .local_noise import local_matching_error
@@ -45,7 +46,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "raise_by_local_error", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -907,6 +908,48 @@ def raise_by_local_error(sigma: dict, records: dict, pairs: list, product: Produ
                                                           knowledge_rate_hz=rate,
                                                           knowledge_smoothing=smooth.get(a)))
     return out
+
+
+def raise_by_knowledge_check(sigma: dict, records: dict, product: Product, settings: RestorationSettings,
+                             restored: dict, smoothings: dict) -> tuple[dict, dict]:
+    """With ``sigma_knowledge_check``: each axis's restored angle checked against its smoothed AOCS knowledge
+    between 1.25 × its high-pass and 0.7 × the knowledge's cut-off (:func:`restore.knowledge_check.knowledge_check`),
+    and its σ raised in quadrature by the disagreement neither prediction holds (``model_sigma`` keeps the σ
+    before it, which "auto" flags judge: a raise common to every line does not say where σ rises).
+
+    ``restored``: the restored angle per axis before flagging [rad]; ``smoothings``: :func:`knowledge_smoothings`.
+    Needs the knowledge's noise and filter in product.nc. Returns ``(sigma, checks)`` with ``checks[axis]`` a
+    :class:`~restore.knowledge_check.KnowledgeCheck` for each axis checked."""
+    attrs = product.ds.attrs
+    if not settings.sigma_knowledge_check or not sigma or product.knowledge_noise is None \
+            or "knowledge_cutoff_hz" not in attrs or "knowledge_filter_order" not in attrs:
+        return sigma, {}
+    noise, rate = product.knowledge_noise
+    t = np.asarray(product.time, dtype=np.float64)
+    order = sorted(set(settings.axes) | set(records))
+    out, checks = dict(sigma), {}
+    for a, ps in sorted(sigma.items()):
+        rec, sm = records.get(a), smoothings.get(a)
+        if rec is None or sm is None or ps.error_power is None:
+            continue
+        k = np.asarray(getattr(product.knowledge, a), dtype=np.float64)
+        chk = knowledge_check(restored[a], smoothed_knowledge_at(sm, k, t - t[0]), np.asarray(
+            product.knowledge.at(t)[AXES.index(a)]), ps.error_power, sm, line_period_s=float(t[1] - t[0]),
+            highpass_hz=float(rec.highpass_hz), cutoff_hz=float(attrs["knowledge_cutoff_hz"]),
+            order=int(attrs["knowledge_filter_order"]), kind=str(attrs.get("knowledge_filter",
+                                                                            "butterworth_zero_phase")),
+            noise_rad=float(noise), rate_hz=float(rate), seed=order.index(a))
+        if chk is None:
+            continue
+        checks[a] = chk
+        if chk.excess_rad2 > 0:
+            out[a] = replace(ps, sigma=np.sqrt(ps.sigma ** 2 + chk.excess_rad2), detrended_sigma=None
+                             if ps.detrended_sigma is None else np.sqrt(ps.detrended_sigma ** 2 + chk.excess_rad2),
+                             detrended_rms=float(np.sqrt(ps.detrended_rms ** 2 + chk.excess_rad2)),
+                             # the same excess on every line says nothing of where σ rises: "auto" flags keep
+                             # judging the σ before it
+                             model_sigma=ps.sigma if ps.model_sigma is None else ps.model_sigma)
+    return out, checks
 
 
 def local_errors(pairs: list, settings: RestorationSettings, n_lines: int) -> dict:

@@ -752,3 +752,50 @@ def test_the_knowledge_below_the_highpass_is_smoothed_and_recorded(tiny_restored
                                                       "correct_images": False})
     assert off.knowledge_smoothing == {}
     assert not any(v.startswith("knowledge_smoothing") for v in xr.load_dataset(run / "restoration.nc").variables)
+
+
+def test_the_knowledge_check_raises_sigma_by_what_it_books_and_leaves_the_flags(tiny_restored, monkeypatch):
+    """stages.raise_by_knowledge_check on the tiny run's own product and records (a 0.15 s record has no
+    periodogram bin to check between its high-pass and the knowledge's cut-off: nothing is checked or raised),
+    then with the check's core made to book an excess: σ rises by exactly that in quadrature on every line,
+    the σ "auto" flags judge stays the one before, an axis with nothing booked is left as it was, and the
+    setting turns it off."""
+    from dataclasses import replace
+    from restore import stages
+    from restore.knowledge_check import KnowledgeCheck
+    from restore.posterior import PosteriorSigma
+    from simsat.product import read_product
+
+    d, res = tiny_restored
+    product = read_product(d)
+    s = res.settings
+    smoothings = stages.knowledge_smoothings(product, s, s.axes)
+    assert set(smoothings) >= {"roll", "pitch"}
+    assert res.knowledge_checks == {}
+    assert json.loads(xr.load_dataset(d / "restoration.nc")["sigma_roll"].attrs["knowledge_check"]) == {}
+    n = res.time.size
+    sig = np.full(n, 1e-8)
+    fake = {a: PosteriorSigma(sigma=sig, noise_scale=1.0, samples=2, detrended_rms=1e-8, detrended_sigma=sig,
+                              error_power=np.zeros(n // 2 + 1)) for a in ("roll", "pitch")}
+    out, checks = stages.raise_by_knowledge_check(fake, res.integration, product, s, res.restored, smoothings)
+    assert checks == {} and out == fake
+    seen = {}
+
+    def booked(restored, ks, k, power, sm, **kw):
+        seen[len(seen)] = (restored, ks, k, power, kw)
+        excess = 9e-16 if len(seen) == 1 else 0.0
+        return KnowledgeCheck((2.5, 7.0), 1e-15 + excess, 5e-16, 5e-16, 8, excess)
+
+    monkeypatch.setattr(stages, "knowledge_check", booked)
+    out, checks = stages.raise_by_knowledge_check(fake, res.integration, product, s, res.restored, smoothings)
+    assert set(checks) == {"roll", "pitch"}
+    np.testing.assert_allclose(out["pitch"].sigma, np.sqrt(sig ** 2 + 9e-16), rtol=1e-12)   # sorted: pitch first
+    np.testing.assert_array_equal(out["pitch"].model_sigma, sig)
+    assert out["pitch"].detrended_rms == pytest.approx(np.sqrt(1e-16 + 9e-16))
+    assert out["roll"] is fake["roll"]
+    restored, ks, k, power, kw = seen[0]
+    np.testing.assert_array_equal(restored, res.restored["pitch"])
+    assert kw["highpass_hz"] == res.integration["pitch"].highpass_hz and power is fake["pitch"].error_power
+    off, none = stages.raise_by_knowledge_check(fake, res.integration, product, replace(s, sigma_knowledge_check=False),
+                                                res.restored, smoothings)
+    assert none == {} and off == fake

@@ -1,0 +1,236 @@
+"""The σ checked against the smoothed AOCS knowledge: what the two disagree by, beyond both predictions.
+
+The predicted σ (:mod:`restore.posterior`) is the error of the images'
+estimate under a model: a stationary attitude from the prior the integration
+estimated, and matching noise calibrated on the fit residual. An error the
+residual cannot show — one that moves like an attitude in every pair, such as
+a sun-driven shading of the texture that shifts all bands' matches alike at a
+few hertz — is missing from it (an unseen scene with 25 % cloud and a low
+sun: actual / predicted σ 1.59 on roll).
+
+The AOCS knowledge sees the same attitude independently. The restored angle
+is ``r = LP(k_s) + H(k + ê)`` (``H`` the restoration's Gaussian high-pass,
+``LP = 1 − H``, ``k_s`` the smoothed knowledge), so its difference from the
+smoothed knowledge holds the two errors only, through the high-pass:
+
+    D = r − k_s = H (e_I − e_K),   E|D|² = H² (P_I + P_K − 2 C),
+
+``e_I`` the images' error, ``P_I`` its power: the posterior draws' error less
+the smoothing's noise below the high-pass they hold (``(1 − H)² P_K``);
+``P_K`` the smoothed knowledge's: the Wiener error its smoothing leaves
+(:meth:`~restore.knowledge_smoothing.KnowledgeSmoothing.error_draw`, the
+draws the σ takes below the high-pass), plus the AOCS filter's own error ``|1 − F|² S_θ``, ``S_θ`` from the
+knowledge's periodogram above its noise floor divided by ``|F|²`` (a causal
+filter's lag, a strong sweep at the filter's edge). The errors' covariance
+``C`` is left out: both hold part of the knowledge's noise with the same sign,
+so ``P_I + P_K`` is an upper bound and the test errs on the side of not firing.
+
+The band runs from ``1.25 ×`` the high-pass (where ``H`` passes 42 %) to
+``0.7 ×`` the knowledge's cut-off (the filter's flat part). Where ``D``'s power
+there exceeds the prediction beyond its sampling spread (a sum of ``m``
+periodogram bins has a relative spread ``1/√m``; the threshold is two of
+them), one of the two predictions is short by at least the excess, and which
+one the data cannot tell. The σ takes it (:func:`excess_variance`): short on
+the images' side, the restored error rises by exactly ``D``'s excess; a
+prediction is better high than optimistic. The check needs the knowledge's
+noise and filter (product.nc) and at least :data:`MIN_BINS` bins in the band;
+otherwise nothing is checked.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from simsat.attitude import AttitudeSeries
+
+from .knowledge_prior import knowledge_noise_floor, knowledge_response
+from .synthesis import highpass_gain
+
+__all__ = ["KnowledgeCheck", "line_power", "check_band", "smoothed_knowledge_at", "knowledge_error_power",
+           "filter_error_power", "excess_variance", "knowledge_check", "MIN_BINS", "SIGNIFICANCE",
+           "LOW_FACTOR", "HIGH_FRACTION"]
+
+#: fewer periodogram bins than this in the band: no check (the spread of the sum would be over 50 %; a 1.6 s
+#: record has 5 bins between 4 and 7 Hz)
+MIN_BINS = 4
+#: the excess counts beyond this many relative spreads (``1/√m``) of the band's power
+SIGNIFICANCE = 2.0
+#: the band starts at this multiple of the high-pass (where the Gaussian high-pass passes 42 %: below it ``D``
+#: holds little of either error)
+LOW_FACTOR = 1.25
+#: the band ends at this fraction of the knowledge's cut-off (the filter's flat part)
+HIGH_FRACTION = 0.7
+#: draws of the smoothing's error averaged into ``P_K``
+KNOWLEDGE_DRAWS = 16
+
+
+@dataclass(frozen=True)
+class KnowledgeCheck:
+    """The images against the smoothed knowledge in one axis's band (:func:`knowledge_check`).
+
+    Attributes
+    ----------
+    band_hz : (float, float)
+        The band checked [Hz].
+    observed_rad2, images_rad2, knowledge_rad2 : float
+        Power in the band [rad², mean square over the lines checked] of ``r − k_s``, the images' predicted
+        error and the smoothed knowledge's predicted error (smoothing noise plus AOCS filter error).
+    bins : int
+        Periodogram bins in the band.
+    excess_rad2 : float
+        What the σ takes: the observed power beyond the sum of the predictions where that is significant, else 0.
+    """
+
+    band_hz: tuple
+    observed_rad2: float
+    images_rad2: float
+    knowledge_rad2: float
+    bins: int
+    excess_rad2: float
+
+    def as_dict(self) -> dict:
+        """Plain values (RMS in rad) as restoration.nc records them (:meth:`from_dict` reads them back)."""
+        return {"band_hz": [float(v) for v in self.band_hz], "bins": int(self.bins),
+                "observed_rms_rad": float(np.sqrt(self.observed_rad2)),
+                "images_rms_rad": float(np.sqrt(self.images_rad2)),
+                "knowledge_rms_rad": float(np.sqrt(self.knowledge_rad2)),
+                "excess_rms_rad": float(np.sqrt(self.excess_rad2)), "ratio": self.ratio,
+                "threshold": self.threshold}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "KnowledgeCheck":
+        """The check :meth:`as_dict` wrote."""
+        return cls(band_hz=tuple(float(v) for v in d["band_hz"]), observed_rad2=float(d["observed_rms_rad"]) ** 2,
+                   images_rad2=float(d["images_rms_rad"]) ** 2, knowledge_rad2=float(d["knowledge_rms_rad"]) ** 2,
+                   bins=int(d["bins"]), excess_rad2=float(d["excess_rms_rad"]) ** 2)
+
+    @property
+    def ratio(self) -> float:
+        """Observed over predicted power."""
+        p = self.images_rad2 + self.knowledge_rad2
+        return float(self.observed_rad2 / p) if p > 0 else float("inf")
+
+    @property
+    def threshold(self) -> float:
+        """Ratio beyond which the excess counts: ``1 + SIGNIFICANCE / √bins``."""
+        return 1.0 + SIGNIFICANCE / np.sqrt(max(self.bins, 1))
+
+
+def line_power(x) -> np.ndarray:
+    """Periodogram of a series over the lines, per bin of ``rfftfreq(n)``, summing to its mean square.
+
+    NaN (lines not restored) count as zero after the mean of the finite ones is removed, so that series
+    with the same gaps are compared on the same footing.
+    """
+    v = np.asarray(x, dtype=np.float64)
+    ok = np.isfinite(v)
+    if not ok.any():
+        return np.zeros(v.size // 2 + 1)
+    v = np.where(ok, v - v[ok].mean(), 0.0)
+    p = np.abs(np.fft.rfft(v)) ** 2 / v.size ** 2
+    p[1:(v.size + 1) // 2] *= 2.0   # both signs of every frequency but 0 and Nyquist
+    return p
+
+
+def check_band(n: int, dt: float, highpass_hz: float, cutoff_hz: float) -> np.ndarray | None:
+    """Boolean mask over ``rfftfreq(n, dt)`` of the band checked, or None when it has fewer than MIN_BINS bins."""
+    if not (highpass_hz > 0 and cutoff_hz > 0):
+        return None
+    f = np.fft.rfftfreq(n, dt)
+    band = (f >= LOW_FACTOR * highpass_hz) & (f <= HIGH_FRACTION * cutoff_hz)
+    return band if np.count_nonzero(band) >= MIN_BINS else None
+
+
+def _read_at(sample_time, samples, line_time) -> np.ndarray:
+    """Samples read at ``line_time`` by cubic interpolation (as the knowledge is read), clamped to their span."""
+    ts = np.asarray(sample_time, dtype=np.float64)
+    s = np.asarray(samples, dtype=np.float64)
+    return AttitudeSeries(ts, s, s, s).at(np.clip(np.asarray(line_time, dtype=np.float64), ts[0], ts[-1]))[0]
+
+
+def smoothed_knowledge_at(smoothing, values, line_time) -> np.ndarray:
+    """The smoothed knowledge samples read at ``line_time`` (cubic, as the knowledge is read; clamped) [rad]."""
+    return _read_at(smoothing.time, smoothing.apply(values), line_time)
+
+
+def knowledge_error_power(smoothing, line_time, mask, rng: np.random.Generator,
+                          draws: int = KNOWLEDGE_DRAWS) -> np.ndarray:
+    """Mean periodogram (:func:`line_power`) over ``draws`` of the smoothed knowledge's error
+    (:meth:`~restore.knowledge_smoothing.KnowledgeSmoothing.error_draw`), read at the lines of ``mask`` (others
+    zero)."""
+    out = 0.0
+    for _ in range(draws):
+        e = _read_at(smoothing.time, smoothing.error_draw(rng), line_time)
+        out = out + line_power(np.where(mask, e, np.nan))
+    return out / draws
+
+
+def filter_error_power(knowledge_power, freq, *, cutoff_hz: float, order: int, kind: str, noise_rad: float,
+                       rate_hz: float, n: int, dt: float, fraction: float = 1.0) -> np.ndarray:
+    """The AOCS filter's own error in the knowledge, per bin: ``|1 − F|² · max(P_k − floor, 0) / |F|²``.
+
+    ``knowledge_power`` is the knowledge's periodogram (:func:`line_power`) over the lines checked (a
+    ``fraction`` of the ``n``), ``floor`` its white noise (:func:`restore.knowledge_prior.knowledge_noise_floor`)
+    in the same units.
+    """
+    g = knowledge_response(freq, cutoff_hz, order, kind)
+    floor = knowledge_noise_floor(freq, rate_hz=rate_hz, noise_rad=noise_rad) * 2.0 / (n * dt) * fraction
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.maximum(np.asarray(knowledge_power) - floor, 0.0) / np.abs(g) ** 2
+    return np.where(np.abs(g) > 1e-6, np.abs(1.0 - g) ** 2 * s, 0.0)
+
+
+def excess_variance(observed: float, images: float, knowledge: float, bins: int) -> float:
+    """The observed power beyond ``images + knowledge`` when the ratio exceeds ``1 + SIGNIFICANCE/√bins``, else 0."""
+    predicted = images + knowledge
+    if bins < 1 or not observed > predicted * (1.0 + SIGNIFICANCE / np.sqrt(bins)):
+        return 0.0
+    return float(observed - predicted)
+
+
+def knowledge_check(restored, smoothed_knowledge, knowledge, images_power, smoothing, *, line_period_s: float,
+                    highpass_hz: float, cutoff_hz: float, order: int, kind: str, noise_rad: float, rate_hz: float,
+                    seed: int = 0) -> KnowledgeCheck | None:
+    """Check one axis's restored angle against its smoothed knowledge (module docstring); None: no band.
+
+    Parameters
+    ----------
+    restored : ndarray (lines,)
+        The restored angle [rad] (NaN: not restored).
+    smoothed_knowledge, knowledge : ndarray (lines,)
+        The smoothed and the raw knowledge at the lines [rad].
+    images_power : ndarray (lines // 2 + 1,)
+        The images' predicted error periodogram (:func:`line_power` of the posterior draws, averaged).
+    smoothing : restore.knowledge_smoothing.KnowledgeSmoothing
+        The knowledge's smoothing (its times from the first line).
+    line_period_s, highpass_hz : float
+        Line period and the restoration's high-pass.
+    cutoff_hz, order, kind, noise_rad, rate_hz
+        The knowledge as product.nc records it.
+    seed : int
+        Seed of the smoothing's error draws.
+    """
+    r = np.asarray(restored, dtype=np.float64)
+    n, dt = r.size, float(line_period_s)
+    band = check_band(n, dt, highpass_hz, cutoff_hz)
+    ok = np.isfinite(r)
+    if band is None or not ok.any():
+        return None
+    freq = np.fft.rfftfreq(n, dt)
+    fraction = float(np.mean(ok))
+    observed = line_power(r - np.asarray(smoothed_knowledge, dtype=np.float64))
+    t = np.arange(n) * dt
+    p_k = knowledge_error_power(smoothing, t, ok, np.random.default_rng(np.random.SeedSequence([int(seed), 0x4B43])))
+    p_f = filter_error_power(line_power(np.where(ok, knowledge, np.nan)), freq, cutoff_hz=cutoff_hz, order=order,
+                             kind=kind, noise_rad=noise_rad, rate_hz=rate_hz, n=n, dt=dt, fraction=fraction)
+    # the draws' error is H e_I + (1 − H) e_K (the images' error through the high-pass H, and the smoothing's
+    # pooled noise below it), D's is H (e_I − e_K): the images' part is the draws' less the knowledge's they hold
+    h = highpass_gain(freq, highpass_hz)
+    images = np.maximum(np.asarray(images_power) - (1.0 - h) ** 2 * p_k, 0.0)
+    m = int(np.count_nonzero(band))
+    # mean squares over the restored lines (the gaps count as zeros in the periodograms)
+    obs, img, kn = (float(np.sum(np.asarray(p)[band])) / fraction for p in (observed, images, h ** 2 * (p_k + p_f)))
+    lo, hi = float(freq[band][0]), float(freq[band][-1])
+    return KnowledgeCheck(band_hz=(lo, hi), observed_rad2=obs, images_rad2=img, knowledge_rad2=kn, bins=m,
+                          excess_rad2=excess_variance(obs, img, kn, m))
