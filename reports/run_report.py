@@ -455,12 +455,12 @@ def _budget_section(pg: _Page, run: D.RunData, integrate, max_integration_s: flo
 
 
 def _knowledge_check_text(chk: dict, ifov: float) -> str:
-    """One cell: the band, observed / predicted power of restored − smoothed knowledge, and what σ took."""
+    """One cell: the band, observed / predicted power of restored − smoothed knowledge, and the excess beyond it."""
     if not chk:
         return "—"
     lo, hi = chk["band_hz"]
     txt = f"{lo:.1f}–{hi:.1f} Hz: {chk['ratio']:.2f} × (limit {chk['threshold']:.2f})"
-    return txt + (f"; σ + {chk['excess_rms_rad'] / ifov:.4f} px in quadrature" if chk["excess_rms_rad"] > 0 else "")
+    return txt + (f"; excess {chk['excess_rms_rad'] / ifov:.4f} px" if chk["excess_rms_rad"] > 0 else "")
 
 
 def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
@@ -493,8 +493,8 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
             "knowledge, which sees the same attitude independently: between 1.25 × the high-pass and 0.7 × the "
             "knowledge's cut-off, the power of restored − smoothed knowledge over the sum of both predicted errors "
             "(images: the draws above; knowledge: the noise its smoothing leaves and its filter's error). Beyond "
-            "the limit (two sampling spreads) the excess is added to σ: one of the two predictions is short by at "
-            "least that much, and the data cannot tell which.")
+            "the limit (two sampling spreads) one of the two predictions is short by at least the excess, and the "
+            "data cannot tell which; restoration.sigma_knowledge_check adds it to σ (off by default).")
 
 
 def _matches_section(pg: _Page, run: D.RunData):

@@ -26,13 +26,23 @@ filter's lag, a strong sweep at the filter's edge). The errors' covariance
 so ``P_I + P_K`` is an upper bound and the test errs on the side of not firing.
 
 The band runs from ``1.25 ×`` the high-pass (where ``H`` passes 42 %) to
-``0.7 ×`` the knowledge's cut-off (the filter's flat part). Where ``D``'s power
-there exceeds the prediction beyond its sampling spread (a sum of ``m``
-periodogram bins has a relative spread ``1/√m``; the threshold is two of
-them), one of the two predictions is short by at least the excess, and which
-one the data cannot tell. The σ takes it (:func:`excess_variance`): short on
-the images' side, the restored error rises by exactly ``D``'s excess; a
-prediction is better high than optimistic. The check needs the knowledge's
+``0.7 ×`` the knowledge's cut-off (the filter's flat part). Every power is
+a periodogram with the quadratic trend removed and a Hann taper
+(:func:`tapered_power`): untapered, the raw knowledge's offset and drift
+leaked into the band (real_aocs: 0.079 px of "filter error" predicted there,
+0.011 tapered), and so did the restored angle's and the draws' slow errors.
+Where ``D``'s power exceeds the prediction beyond its sampling spread (a sum
+of ``m`` tapered bins has a relative spread ``1/√(m / ENBW)``; the threshold
+is two of them), one of the two predictions is short by at least the excess,
+and which one the data cannot tell.
+
+The check is recorded on every axis it can be made on (restoration.nc, the
+report). ``restoration.sigma_knowledge_check`` (off by default) adds the
+excess to σ (:func:`excess_variance`): right when the images' side is short
+(the restored error then rises by exactly ``D``'s excess), wrong when the
+knowledge's is — on geo_noisy_knowledge the smoothed knowledge's error in the
+band is larger than predicted, and booking it on the images took actual /
+predicted σ from 1.34 / 1.50 to 0.35 / 0.42. The check needs the knowledge's
 noise and filter (product.nc) and at least :data:`MIN_BINS` bins in the band;
 otherwise nothing is checked.
 """
@@ -47,15 +57,18 @@ from simsat.attitude import AttitudeSeries
 from .knowledge_prior import knowledge_noise_floor, knowledge_response
 from .synthesis import highpass_gain
 
-__all__ = ["KnowledgeCheck", "line_power", "check_band", "smoothed_knowledge_at", "knowledge_error_power",
+__all__ = ["KnowledgeCheck", "line_power", "tapered_power", "check_band", "smoothed_knowledge_at",
+           "knowledge_error_power",
            "filter_error_power", "excess_variance", "knowledge_check", "MIN_BINS", "SIGNIFICANCE",
-           "LOW_FACTOR", "HIGH_FRACTION"]
+           "LOW_FACTOR", "HIGH_FRACTION", "ENBW"]
 
 #: fewer periodogram bins than this in the band: no check (the spread of the sum would be over 50 %; a 1.6 s
 #: record has 5 bins between 4 and 7 Hz)
 MIN_BINS = 4
-#: the excess counts beyond this many relative spreads (``1/√m``) of the band's power
+#: the excess counts beyond this many relative spreads (``1/√(m / ENBW)``) of the band's power
 SIGNIFICANCE = 2.0
+#: equivalent noise bandwidth of the Hann taper [bins]: ``m`` tapered bins are worth ``m / ENBW`` independent ones
+ENBW = 1.5
 #: the band starts at this multiple of the high-pass (where the Gaussian high-pass passes 42 %: below it ``D``
 #: holds little of either error)
 LOW_FACTOR = 1.25
@@ -113,8 +126,8 @@ class KnowledgeCheck:
 
     @property
     def threshold(self) -> float:
-        """Ratio beyond which the excess counts: ``1 + SIGNIFICANCE / √bins``."""
-        return 1.0 + SIGNIFICANCE / np.sqrt(max(self.bins, 1))
+        """Ratio beyond which the excess counts: ``1 + SIGNIFICANCE / √(bins / ENBW)``."""
+        return 1.0 + SIGNIFICANCE / np.sqrt(max(self.bins, 1) / ENBW)
 
 
 def line_power(x) -> np.ndarray:
@@ -131,6 +144,21 @@ def line_power(x) -> np.ndarray:
     p = np.abs(np.fft.rfft(v)) ** 2 / v.size ** 2
     p[1:(v.size + 1) // 2] *= 2.0   # both signs of every frequency but 0 and Nyquist
     return p
+
+
+def tapered_power(x, mask) -> np.ndarray:
+    """Periodogram of ``x`` on the lines of ``mask`` (others zero), like :func:`line_power`, but with its quadratic
+    trend removed and a Hann taper (normalised so that a stationary series keeps its power): the raw knowledge
+    holds an offset, a drift and slow motions of pixels whose leakage would pass for power at a few hertz, and
+    so may the draws' errors and the restored angle; every power the check compares is taken this way."""
+    v = np.asarray(x, dtype=np.float64)
+    m = np.asarray(mask, dtype=bool) & np.isfinite(v)
+    if np.count_nonzero(m) < 3:
+        return np.zeros(v.size // 2 + 1)
+    u = np.linspace(-1.0, 1.0, v.size)
+    v = v - np.polyval(np.polyfit(u[m], v[m], 2), u)
+    w = np.hanning(v.size)
+    return line_power(np.where(m, v * w, np.nan)) / np.mean(w ** 2)
 
 
 def check_band(n: int, dt: float, highpass_hz: float, cutoff_hz: float) -> np.ndarray | None:
@@ -156,13 +184,13 @@ def smoothed_knowledge_at(smoothing, values, line_time) -> np.ndarray:
 
 def knowledge_error_power(smoothing, line_time, mask, rng: np.random.Generator,
                           draws: int = KNOWLEDGE_DRAWS) -> np.ndarray:
-    """Mean periodogram (:func:`line_power`) over ``draws`` of the smoothed knowledge's error
+    """Mean periodogram (:func:`tapered_power`) over ``draws`` of the smoothed knowledge's error
     (:meth:`~restore.knowledge_smoothing.KnowledgeSmoothing.error_draw`), read at the lines of ``mask`` (others
     zero)."""
     out = 0.0
     for _ in range(draws):
         e = _read_at(smoothing.time, smoothing.error_draw(rng), line_time)
-        out = out + line_power(np.where(mask, e, np.nan))
+        out = out + tapered_power(e, mask)
     return out / draws
 
 
@@ -170,7 +198,7 @@ def filter_error_power(knowledge_power, freq, *, cutoff_hz: float, order: int, k
                        rate_hz: float, n: int, dt: float, fraction: float = 1.0) -> np.ndarray:
     """The AOCS filter's own error in the knowledge, per bin: ``|1 − F|² · max(P_k − floor, 0) / |F|²``.
 
-    ``knowledge_power`` is the knowledge's periodogram (:func:`line_power`) over the lines checked (a
+    ``knowledge_power`` is the knowledge's periodogram (:func:`tapered_power`) over the lines checked (a
     ``fraction`` of the ``n``), ``floor`` its white noise (:func:`restore.knowledge_prior.knowledge_noise_floor`)
     in the same units.
     """
@@ -182,9 +210,10 @@ def filter_error_power(knowledge_power, freq, *, cutoff_hz: float, order: int, k
 
 
 def excess_variance(observed: float, images: float, knowledge: float, bins: int) -> float:
-    """The observed power beyond ``images + knowledge`` when the ratio exceeds ``1 + SIGNIFICANCE/√bins``, else 0."""
+    """The observed power beyond ``images + knowledge`` when the ratio exceeds ``1 + SIGNIFICANCE / √(bins / ENBW)``
+    (``bins`` tapered periodogram bins), else 0."""
     predicted = images + knowledge
-    if bins < 1 or not observed > predicted * (1.0 + SIGNIFICANCE / np.sqrt(bins)):
+    if bins < 1 or not observed > predicted * (1.0 + SIGNIFICANCE / np.sqrt(bins / ENBW)):
         return 0.0
     return float(observed - predicted)
 
@@ -201,7 +230,7 @@ def knowledge_check(restored, smoothed_knowledge, knowledge, images_power, smoot
     smoothed_knowledge, knowledge : ndarray (lines,)
         The smoothed and the raw knowledge at the lines [rad].
     images_power : ndarray (lines // 2 + 1,)
-        The images' predicted error periodogram (:func:`line_power` of the posterior draws, averaged).
+        The images' predicted error periodogram (:func:`tapered_power` of the posterior draws, averaged).
     smoothing : restore.knowledge_smoothing.KnowledgeSmoothing
         The knowledge's smoothing (its times from the first line).
     line_period_s, highpass_hz : float
@@ -219,10 +248,10 @@ def knowledge_check(restored, smoothed_knowledge, knowledge, images_power, smoot
         return None
     freq = np.fft.rfftfreq(n, dt)
     fraction = float(np.mean(ok))
-    observed = line_power(r - np.asarray(smoothed_knowledge, dtype=np.float64))
+    observed = tapered_power(r - np.asarray(smoothed_knowledge, dtype=np.float64), ok)
     t = np.arange(n) * dt
     p_k = knowledge_error_power(smoothing, t, ok, np.random.default_rng(np.random.SeedSequence([int(seed), 0x4B43])))
-    p_f = filter_error_power(line_power(np.where(ok, knowledge, np.nan)), freq, cutoff_hz=cutoff_hz, order=order,
+    p_f = filter_error_power(tapered_power(knowledge, ok), freq, cutoff_hz=cutoff_hz, order=order,
                              kind=kind, noise_rad=noise_rad, rate_hz=rate_hz, n=n, dt=dt, fraction=fraction)
     # the draws' error is H e_I + (1 − H) e_K (the images' error through the high-pass H, and the smoothing's
     # pooled noise below it), D's is H (e_I − e_K): the images' part is the draws' less the knowledge's they hold

@@ -76,7 +76,7 @@ from scipy.fft import irfft, next_fast_len, rfft
 from scipy.interpolate import CubicSpline
 from scipy.ndimage import uniform_filter1d
 
-from .knowledge_check import line_power
+from .knowledge_check import tapered_power
 from .knowledge_prior import knowledge_noise_floor
 from .knowledge_smoothing import lowband
 from .synthesis import highpass_gain, highpass_nan
@@ -87,7 +87,7 @@ __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", 
            "knowledge_noise_below", "draw_psd", "pair_bands", "SharedBandNoise", "shared_band_noise",
            "correlated_noise",
            "detrended", "detrended_rms", "detrended_rms_over", "local_error_sigma", "larger_sigma",
-           "mean_line_power"]
+           "mean_error_power"]
 
 
 #: the real fit residual may exceed the simulated one by this factor before the noise is inflated
@@ -138,8 +138,9 @@ class PosteriorSigma:
     local_detrended_rms: float = float("nan")
     #: the model's σ per line before :func:`larger_sigma` raised it (None when not raised)
     model_sigma: np.ndarray | None = None
-    #: mean periodogram of the draws' errors per bin of ``rfftfreq(lines)`` [rad², summing to their mean square
-    #: with the lines not restored as zeros] (:func:`restore.knowledge_check.line_power`); None when not kept
+    #: mean periodogram of the draws' errors per bin of ``rfftfreq(lines)`` [rad², summing to about their mean
+    #: square with the lines not restored as zeros; trend removed, Hann taper] (:func:`mean_error_power`); None
+    #: when not kept
     error_power: np.ndarray | None = None
 
 
@@ -612,7 +613,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
                           samples=int(samples), noise_colour=colour, detrended_rms=detrended_rms(errs),
                           detrended_sigma=np.sqrt(_line_variance(detrended(errs), smooth_lines)),
                           band_shares=shared.band_shares() if shared is not None else {},
-                          colour_estimate=estimate, error_power=mean_line_power(errs))
+                          colour_estimate=estimate, error_power=mean_error_power(errs))
 
 
 def _draw_setup(record, samples: int, knowledge_noise_rad: float = 0.0, knowledge_rate_hz: float | None = None
@@ -728,12 +729,12 @@ def local_error_sigma(record, local: np.ndarray, *, samples: int = 8, seed: int 
     return PosteriorSigma(sigma=np.sqrt(_line_variance(errs, smooth_lines)), noise_scale=1.0, samples=int(samples),
                           detrended_rms=detrended_rms(errs),
                           detrended_sigma=np.sqrt(_line_variance(detrended(errs), smooth_lines)),
-                          error_power=mean_line_power(errs))
+                          error_power=mean_error_power(errs))
 
 
-def mean_line_power(errs: np.ndarray) -> np.ndarray:
-    """Mean over the draws (rows) of :func:`restore.knowledge_check.line_power`."""
-    return np.mean([line_power(e) for e in np.asarray(errs, dtype=np.float64)], axis=0)
+def mean_error_power(errs: np.ndarray) -> np.ndarray:
+    """Mean over the draws (rows) of :func:`restore.knowledge_check.tapered_power` on each draw's finite lines."""
+    return np.mean([tapered_power(e, np.isfinite(e)) for e in np.asarray(errs, dtype=np.float64)], axis=0)
 
 
 def larger_sigma(model: PosteriorSigma, local: PosteriorSigma) -> PosteriorSigma:

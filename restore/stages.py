@@ -912,16 +912,17 @@ def raise_by_local_error(sigma: dict, records: dict, pairs: list, product: Produ
 
 def raise_by_knowledge_check(sigma: dict, records: dict, product: Product, settings: RestorationSettings,
                              restored: dict, smoothings: dict) -> tuple[dict, dict]:
-    """With ``sigma_knowledge_check``: each axis's restored angle checked against its smoothed AOCS knowledge
-    between 1.25 × its high-pass and 0.7 × the knowledge's cut-off (:func:`restore.knowledge_check.knowledge_check`),
-    and its σ raised in quadrature by the disagreement neither prediction holds (``model_sigma`` keeps the σ
-    before it, which "auto" flags judge: a raise common to every line does not say where σ rises).
+    """Each axis's restored angle checked against its smoothed AOCS knowledge between 1.25 × its high-pass and
+    0.7 × the knowledge's cut-off (:func:`restore.knowledge_check.knowledge_check`); with
+    ``sigma_knowledge_check`` its σ is raised in quadrature by the disagreement neither prediction holds
+    (``model_sigma`` keeps the σ before it, which "auto" flags judge: a raise common to every line does not say
+    where σ rises).
 
     ``restored``: the restored angle per axis before flagging [rad]; ``smoothings``: :func:`knowledge_smoothings`.
     Needs the knowledge's noise and filter in product.nc. Returns ``(sigma, checks)`` with ``checks[axis]`` a
-    :class:`~restore.knowledge_check.KnowledgeCheck` for each axis checked."""
+    :class:`~restore.knowledge_check.KnowledgeCheck` for each axis checked (recorded whether or not σ takes it)."""
     attrs = product.ds.attrs
-    if not settings.sigma_knowledge_check or not sigma or product.knowledge_noise is None \
+    if not sigma or product.knowledge_noise is None \
             or "knowledge_cutoff_hz" not in attrs or "knowledge_filter_order" not in attrs:
         return sigma, {}
     noise, rate = product.knowledge_noise
@@ -942,7 +943,7 @@ def raise_by_knowledge_check(sigma: dict, records: dict, product: Product, setti
         if chk is None:
             continue
         checks[a] = chk
-        if chk.excess_rad2 > 0:
+        if settings.sigma_knowledge_check and chk.excess_rad2 > 0:
             out[a] = replace(ps, sigma=np.sqrt(ps.sigma ** 2 + chk.excess_rad2), detrended_sigma=None
                              if ps.detrended_sigma is None else np.sqrt(ps.detrended_sigma ** 2 + chk.excess_rad2),
                              detrended_rms=float(np.sqrt(ps.detrended_rms ** 2 + chk.excess_rad2)),

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from restore.knowledge_check import (KnowledgeCheck, check_band, excess_variance, filter_error_power,
-                                     knowledge_check, line_power, smoothed_knowledge_at, MIN_BINS)
+                                     knowledge_check, line_power, smoothed_knowledge_at, tapered_power,
+                                     ENBW, MIN_BINS)
 from restore.knowledge_prior import knowledge_gain, knowledge_noise_floor
 from restore.knowledge_smoothing import knowledge_smoothing, lowband
 from restore.synthesis import highpass_gain, highpass_nan
@@ -44,16 +45,16 @@ def test_the_band_runs_from_twice_the_highpass_to_the_filters_flat_part():
 
 
 def test_the_excess_counts_only_beyond_the_sampling_spread():
-    # 100 bins: threshold 1 + 2/10 = 1.2 × the prediction
-    assert excess_variance(1.19, 0.6, 0.4, 100) == 0.0
-    assert excess_variance(1.5, 0.6, 0.4, 100) == pytest.approx(0.5)
-    assert excess_variance(0.5, 0.6, 0.4, 100) == 0.0
-    chk = KnowledgeCheck((4.0, 7.0), 1.5, 0.6, 0.4, 100, excess_variance(1.5, 0.6, 0.4, 100))
+    # 150 tapered bins are worth 100 independent ones (ENBW 1.5): threshold 1 + 2/10 = 1.2 × the prediction
+    assert excess_variance(1.19, 0.6, 0.4, 150) == 0.0
+    assert excess_variance(1.5, 0.6, 0.4, 150) == pytest.approx(0.5)
+    assert excess_variance(0.5, 0.6, 0.4, 150) == 0.0
+    chk = KnowledgeCheck((4.0, 7.0), 1.5, 0.6, 0.4, 150, excess_variance(1.5, 0.6, 0.4, 150))
     # the high-pass's gain: 1/√2 of its low-pass left at the cut-off, nothing at 0, all far above
     assert highpass_gain(np.array([0.0, 2.0, 20.0]), 2.0) == pytest.approx([0.0, 1 - 2 ** -0.5, 1.0], abs=1e-12)
     assert chk.ratio == pytest.approx(1.5) and chk.threshold == pytest.approx(1.2)
     back = KnowledgeCheck.from_dict(chk.as_dict())
-    assert back.band_hz == chk.band_hz and back.bins == 100
+    assert back.band_hz == chk.band_hz and back.bins == 150
     assert back.excess_rad2 == pytest.approx(0.5) and back.observed_rad2 == pytest.approx(1.5)
 
 
@@ -97,9 +98,9 @@ def _check(rng, tone_rad=0.0, tone_hz=5.0):
     """The check of :func:`_scene`, the images' prediction from draws made as the posterior makes them: the
     images' white error through the high-pass plus the smoothing's noise below it."""
     t, ts, k, sm, restored = _scene(rng, tone_rad, tone_hz)
-    draws = np.mean([line_power(highpass_nan(rng.standard_normal(N) * 2e-7, dt=DT, cutoff_hz=HP)
-                                + lowband(sm.error_draw(rng), ts, t, line_period_s=DT, highpass_hz=HP))
-                     for _ in range(8)], axis=0)
+    draws = np.mean([tapered_power(highpass_nan(rng.standard_normal(N) * 2e-7, dt=DT, cutoff_hz=HP)
+                                   + lowband(sm.error_draw(rng), ts, t, line_period_s=DT, highpass_hz=HP),
+                                   np.ones(N, bool)) for _ in range(8)], axis=0)
     k_lines = AttitudeSeries(ts, k, k, k).at(np.clip(t, ts[0], ts[-1]))[0]   # read as product.nc's knowledge is
     return knowledge_check(restored, smoothed_knowledge_at(sm, k, t), k_lines, draws, sm, line_period_s=DT,
                            highpass_hz=HP, cutoff_hz=CUTOFF, order=ORDER, kind="butterworth_zero_phase",
@@ -121,10 +122,10 @@ def test_restored_and_knowledge_agreeing_within_their_predictions_raise_nothing(
 def test_an_error_both_predictions_miss_is_what_the_sigma_takes():
     """A 5 Hz tone of 0.4 µrad in the images' estimate, unknown to their prediction: the restored angle holds it
     through the high-pass, H(5 Hz) · 0.4 µrad, and the excess the check books is that tone's mean square, within
-    two sampling spreads of the band's power (2 / √bins)."""
+    two sampling spreads of the band's power (2 / √(bins / ENBW))."""
     for s in range(3):
         c = _check(np.random.default_rng(100 + s), tone_rad=4e-7)
         tone = (highpass_gain(5.0, HP) * 4e-7) ** 2 / 2
-        assert c.excess_rad2 == pytest.approx(tone, rel=2 / np.sqrt(c.bins))
+        assert c.excess_rad2 == pytest.approx(tone, rel=2 / np.sqrt(c.bins / ENBW))
     # and the check ignores what lies outside its band: the same tone at 9 Hz (above 0.7 × 10 Hz)
     assert _check(np.random.default_rng(7), tone_rad=4e-7, tone_hz=9.0).excess_rad2 == 0.0

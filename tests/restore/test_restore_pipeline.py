@@ -757,9 +757,9 @@ def test_the_knowledge_below_the_highpass_is_smoothed_and_recorded(tiny_restored
 def test_the_knowledge_check_raises_sigma_by_what_it_books_and_leaves_the_flags(tiny_restored, monkeypatch):
     """stages.raise_by_knowledge_check on the tiny run's own product and records (a 0.15 s record has no
     periodogram bin to check between its high-pass and the knowledge's cut-off: nothing is checked or raised),
-    then with the check's core made to book an excess: σ rises by exactly that in quadrature on every line,
-    the σ "auto" flags judge stays the one before, an axis with nothing booked is left as it was, and the
-    setting turns it off."""
+    then with the check's core made to book an excess: recorded with restoration.sigma_knowledge_check off (the
+    default), σ untouched; with it on, σ rises by exactly that in quadrature on every line, the σ "auto" flags
+    judge stays the one before, and an axis with nothing booked is left as it was."""
     from dataclasses import replace
     from restore import stages
     from restore.knowledge_check import KnowledgeCheck
@@ -779,6 +779,8 @@ def test_the_knowledge_check_raises_sigma_by_what_it_books_and_leaves_the_flags(
                               error_power=np.zeros(n // 2 + 1)) for a in ("roll", "pitch")}
     out, checks = stages.raise_by_knowledge_check(fake, res.integration, product, s, res.restored, smoothings)
     assert checks == {} and out == fake
+    with pytest.raises(ScenarioError, match="sigma_knowledge_check"):
+        restoration_settings({"sigma_knowledge_check": "yes"})
     seen = {}
 
     def booked(restored, ks, k, power, sm, **kw):
@@ -787,7 +789,13 @@ def test_the_knowledge_check_raises_sigma_by_what_it_books_and_leaves_the_flags(
         return KnowledgeCheck((2.5, 7.0), 1e-15 + excess, 5e-16, 5e-16, 8, excess)
 
     monkeypatch.setattr(stages, "knowledge_check", booked)
+    # off (the default): the checks are recorded, σ is left as it is
+    assert not s.sigma_knowledge_check
     out, checks = stages.raise_by_knowledge_check(fake, res.integration, product, s, res.restored, smoothings)
+    assert set(checks) == {"roll", "pitch"} and checks["pitch"].excess_rad2 == 9e-16 and out == fake
+    seen.clear()
+    on = replace(s, sigma_knowledge_check=True)
+    out, checks = stages.raise_by_knowledge_check(fake, res.integration, product, on, res.restored, smoothings)
     assert set(checks) == {"roll", "pitch"}
     np.testing.assert_allclose(out["pitch"].sigma, np.sqrt(sig ** 2 + 9e-16), rtol=1e-12)   # sorted: pitch first
     np.testing.assert_array_equal(out["pitch"].model_sigma, sig)
@@ -796,6 +804,3 @@ def test_the_knowledge_check_raises_sigma_by_what_it_books_and_leaves_the_flags(
     restored, ks, k, power, kw = seen[0]
     np.testing.assert_array_equal(restored, res.restored["pitch"])
     assert kw["highpass_hz"] == res.integration["pitch"].highpass_hz and power is fake["pitch"].error_power
-    off, none = stages.raise_by_knowledge_check(fake, res.integration, product, replace(s, sigma_knowledge_check=False),
-                                                res.restored, smoothings)
-    assert none == {} and off == fake
