@@ -460,7 +460,10 @@ def _knowledge_check_text(chk: dict, ifov: float) -> str:
         return "—"
     lo, hi = chk["band_hz"]
     txt = f"{lo:.1f}–{hi:.1f} Hz: {chk['ratio']:.2f} × (limit {chk['threshold']:.2f})"
-    return txt + (f"; excess {chk['excess_rms_rad'] / ifov:.4f} px" if chk["excess_rms_rad"] > 0 else "")
+    if not chk["excess_rms_rad"] > 0:
+        return txt
+    return txt + (f"; excess {chk['excess_rms_rad'] / ifov:.4f} px, σ takes "
+                  f"{chk.get('booked_rms_rad', chk['excess_rms_rad']) / ifov:.4f} px of it")
 
 
 def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
@@ -494,7 +497,7 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
             "knowledge's cut-off, the power of restored − smoothed knowledge over the sum of both predicted errors "
             "(images: the draws above; knowledge: the noise its smoothing leaves and its filter's error). Beyond "
             "the limit (two sampling spreads) one of the two predictions is short by at least the excess, and the "
-            "data cannot tell which; restoration.sigma_knowledge_check adds it to σ (off by default).")
+            "data cannot tell which; σ takes the images' share of it (restoration.sigma_knowledge_check).")
 
 
 def _matches_section(pg: _Page, run: D.RunData):

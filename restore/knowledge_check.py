@@ -37,14 +37,17 @@ is two of them), one of the two predictions is short by at least the excess,
 and which one the data cannot tell.
 
 The check is recorded on every axis it can be made on (restoration.nc, the
-report). ``restoration.sigma_knowledge_check`` (off by default) adds the
-excess to σ (:func:`excess_variance`): right when the images' side is short
-(the restored error then rises by exactly ``D``'s excess), wrong when the
-knowledge's is — on geo_noisy_knowledge the smoothed knowledge's error in the
-band is larger than predicted, and booking it on the images took actual /
-predicted σ from 1.34 / 1.50 to 0.35 / 0.42. The check needs the knowledge's
-noise and filter (product.nc) and at least :data:`MIN_BINS` bins in the band;
-otherwise nothing is checked.
+report). ``restoration.sigma_knowledge_check`` (on by default) adds to σ the
+images' share of the excess, ``P_I / (P_I + P_K)`` of it
+(:attr:`KnowledgeCheck.booked_rad2`): each prediction taken short in
+proportion to its size. All of it would be right when the images' side is
+short (the restored error then rises by exactly ``D``'s excess) and wrong
+when the knowledge's is: on geo_noisy_knowledge, whose knowledge noise
+dominates the band (images' share 1–2 %) and errs more than predicted there,
+booking the whole excess took actual / predicted σ from 1.34 / 1.50 to
+0.35 / 0.42; the share takes it to 1.19 / 1.41. The check needs the
+knowledge's noise and filter (product.nc) and at least :data:`MIN_BINS` bins
+in the band; otherwise nothing is checked.
 """
 from __future__ import annotations
 
@@ -92,7 +95,7 @@ class KnowledgeCheck:
     bins : int
         Periodogram bins in the band.
     excess_rad2 : float
-        What the σ takes: the observed power beyond the sum of the predictions where that is significant, else 0.
+        The observed power beyond the sum of the predictions where that is significant, else 0.
     """
 
     band_hz: tuple
@@ -109,6 +112,7 @@ class KnowledgeCheck:
                 "images_rms_rad": float(np.sqrt(self.images_rad2)),
                 "knowledge_rms_rad": float(np.sqrt(self.knowledge_rad2)),
                 "excess_rms_rad": float(np.sqrt(self.excess_rad2)), "ratio": self.ratio,
+                "booked_rms_rad": float(np.sqrt(self.booked_rad2)),
                 "threshold": self.threshold}
 
     @classmethod
@@ -117,6 +121,18 @@ class KnowledgeCheck:
         return cls(band_hz=tuple(float(v) for v in d["band_hz"]), observed_rad2=float(d["observed_rms_rad"]) ** 2,
                    images_rad2=float(d["images_rms_rad"]) ** 2, knowledge_rad2=float(d["knowledge_rms_rad"]) ** 2,
                    bins=int(d["bins"]), excess_rad2=float(d["excess_rms_rad"]) ** 2)
+
+    @property
+    def images_share(self) -> float:
+        """The images' share of the predicted power, ``P_I / (P_I + P_K)``."""
+        p = self.images_rad2 + self.knowledge_rad2
+        return float(self.images_rad2 / p) if p > 0 else 0.0
+
+    @property
+    def booked_rad2(self) -> float:
+        """What σ takes of the excess: the images' share of it (the data cannot tell which prediction is short;
+        each is taken short in proportion to its size)."""
+        return self.excess_rad2 * self.images_share
 
     @property
     def ratio(self) -> float:

@@ -53,7 +53,7 @@ class RestorationSettings:
     deconvolve_exposure: bool = True
     highpass_per_axis: bool = False
     sigma_local_error: bool = True
-    sigma_knowledge_check: bool = False
+    sigma_knowledge_check: bool = True
     knowledge_prior: bool = True
     rematch: int | str = "auto"
     rematch_search: tuple = (2, 2)

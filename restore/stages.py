@@ -914,9 +914,9 @@ def raise_by_knowledge_check(sigma: dict, records: dict, product: Product, setti
                              restored: dict, smoothings: dict) -> tuple[dict, dict]:
     """Each axis's restored angle checked against its smoothed AOCS knowledge between 1.25 × its high-pass and
     0.7 × the knowledge's cut-off (:func:`restore.knowledge_check.knowledge_check`); with
-    ``sigma_knowledge_check`` its σ is raised in quadrature by the disagreement neither prediction holds
-    (``model_sigma`` keeps the σ before it, which "auto" flags judge: a raise common to every line does not say
-    where σ rises).
+    ``sigma_knowledge_check`` its σ is raised in quadrature by the images' share of the disagreement neither
+    prediction holds (:attr:`~restore.knowledge_check.KnowledgeCheck.booked_rad2`; ``model_sigma`` keeps the σ
+    before it, which "auto" flags judge: a raise common to every line does not say where σ rises).
 
     ``restored``: the restored angle per axis before flagging [rad]; ``smoothings``: :func:`knowledge_smoothings`.
     Needs the knowledge's noise and filter in product.nc. Returns ``(sigma, checks)`` with ``checks[axis]`` a
@@ -943,10 +943,11 @@ def raise_by_knowledge_check(sigma: dict, records: dict, product: Product, setti
         if chk is None:
             continue
         checks[a] = chk
-        if settings.sigma_knowledge_check and chk.excess_rad2 > 0:
-            out[a] = replace(ps, sigma=np.sqrt(ps.sigma ** 2 + chk.excess_rad2), detrended_sigma=None
-                             if ps.detrended_sigma is None else np.sqrt(ps.detrended_sigma ** 2 + chk.excess_rad2),
-                             detrended_rms=float(np.sqrt(ps.detrended_rms ** 2 + chk.excess_rad2)),
+        if settings.sigma_knowledge_check and chk.booked_rad2 > 0:
+            b = chk.booked_rad2
+            out[a] = replace(ps, sigma=np.sqrt(ps.sigma ** 2 + b), detrended_sigma=None
+                             if ps.detrended_sigma is None else np.sqrt(ps.detrended_sigma ** 2 + b),
+                             detrended_rms=float(np.sqrt(ps.detrended_rms ** 2 + b)),
                              # the same excess on every line says nothing of where σ rises: "auto" flags keep
                              # judging the σ before it
                              model_sigma=ps.sigma if ps.model_sigma is None else ps.model_sigma)

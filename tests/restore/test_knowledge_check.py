@@ -53,6 +53,8 @@ def test_the_excess_counts_only_beyond_the_sampling_spread():
     # the high-pass's gain: 1/√2 of its low-pass left at the cut-off, nothing at 0, all far above
     assert highpass_gain(np.array([0.0, 2.0, 20.0]), 2.0) == pytest.approx([0.0, 1 - 2 ** -0.5, 1.0], abs=1e-12)
     assert chk.ratio == pytest.approx(1.5) and chk.threshold == pytest.approx(1.2)
+    # σ takes the images' share of the excess: 0.6 / (0.6 + 0.4) of 0.5
+    assert chk.images_share == pytest.approx(0.6) and chk.booked_rad2 == pytest.approx(0.3)
     back = KnowledgeCheck.from_dict(chk.as_dict())
     assert back.band_hz == chk.band_hz and back.bins == 150
     assert back.excess_rad2 == pytest.approx(0.5) and back.observed_rad2 == pytest.approx(1.5)

@@ -757,9 +757,9 @@ def test_the_knowledge_below_the_highpass_is_smoothed_and_recorded(tiny_restored
 def test_the_knowledge_check_raises_sigma_by_what_it_books_and_leaves_the_flags(tiny_restored, monkeypatch):
     """stages.raise_by_knowledge_check on the tiny run's own product and records (a 0.15 s record has no
     periodogram bin to check between its high-pass and the knowledge's cut-off: nothing is checked or raised),
-    then with the check's core made to book an excess: recorded with restoration.sigma_knowledge_check off (the
-    default), σ untouched; with it on, σ rises by exactly that in quadrature on every line, the σ "auto" flags
-    judge stays the one before, and an axis with nothing booked is left as it was."""
+    then with the check's core made to find an excess: recorded with restoration.sigma_knowledge_check off, σ
+    untouched; with it on (the default), σ rises in quadrature on every line by the images' share of it, the σ
+    "auto" flags judge stays the one before, and an axis with no excess is left as it was."""
     from dataclasses import replace
     from restore import stages
     from restore.knowledge_check import KnowledgeCheck
@@ -789,17 +789,19 @@ def test_the_knowledge_check_raises_sigma_by_what_it_books_and_leaves_the_flags(
         return KnowledgeCheck((2.5, 7.0), 1e-15 + excess, 5e-16, 5e-16, 8, excess)
 
     monkeypatch.setattr(stages, "knowledge_check", booked)
-    # off (the default): the checks are recorded, σ is left as it is
-    assert not s.sigma_knowledge_check
-    out, checks = stages.raise_by_knowledge_check(fake, res.integration, product, s, res.restored, smoothings)
+    # off: the checks are recorded, σ is left as it is
+    assert s.sigma_knowledge_check        # the default
+    off = replace(s, sigma_knowledge_check=False)
+    out, checks = stages.raise_by_knowledge_check(fake, res.integration, product, off, res.restored, smoothings)
     assert set(checks) == {"roll", "pitch"} and checks["pitch"].excess_rad2 == 9e-16 and out == fake
     seen.clear()
-    on = replace(s, sigma_knowledge_check=True)
-    out, checks = stages.raise_by_knowledge_check(fake, res.integration, product, on, res.restored, smoothings)
+    out, checks = stages.raise_by_knowledge_check(fake, res.integration, product, s, res.restored, smoothings)
     assert set(checks) == {"roll", "pitch"}
-    np.testing.assert_allclose(out["pitch"].sigma, np.sqrt(sig ** 2 + 9e-16), rtol=1e-12)   # sorted: pitch first
+    # images and knowledge predicted alike (5e-16 each): σ takes half the excess; sorted, pitch comes first
+    assert checks["pitch"].booked_rad2 == pytest.approx(4.5e-16, rel=1e-12)
+    np.testing.assert_allclose(out["pitch"].sigma, np.sqrt(sig ** 2 + 4.5e-16), rtol=1e-12)
     np.testing.assert_array_equal(out["pitch"].model_sigma, sig)
-    assert out["pitch"].detrended_rms == pytest.approx(np.sqrt(1e-16 + 9e-16))
+    assert out["pitch"].detrended_rms == pytest.approx(np.sqrt(1e-16 + 4.5e-16))
     assert out["roll"] is fake["roll"]
     restored, ks, k, power, kw = seen[0]
     np.testing.assert_array_equal(restored, res.restored["pitch"])
