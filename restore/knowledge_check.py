@@ -55,18 +55,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simsat.attitude import AttitudeSeries
-
 from .knowledge_prior import knowledge_noise_floor, knowledge_response
+from .knowledge_smoothing import samples_at_lines
 from .synthesis import highpass_gain
 
 __all__ = ["KnowledgeCheck", "line_power", "tapered_power", "check_band", "smoothed_knowledge_at",
            "knowledge_error_power",
-           "filter_error_power", "excess_variance", "knowledge_check", "MIN_BINS", "SIGNIFICANCE",
+           "filter_error_power", "threshold_ratio", "excess_variance", "knowledge_check", "MIN_BINS", "SIGNIFICANCE",
            "LOW_FACTOR", "HIGH_FRACTION", "ENBW"]
 
-#: fewer periodogram bins than this in the band: no check (the spread of the sum would be over 50 %; a 1.6 s
-#: record has 5 bins between 4 and 7 Hz)
+#: fewer periodogram bins than this in the band: no check (a 1.6 s record has 8 between 2.5 and 7 Hz)
 MIN_BINS = 4
 #: the excess counts beyond this many relative spreads (``1/√(m / ENBW)``) of the band's power
 SIGNIFICANCE = 2.0
@@ -142,8 +140,8 @@ class KnowledgeCheck:
 
     @property
     def threshold(self) -> float:
-        """Ratio beyond which the excess counts: ``1 + SIGNIFICANCE / √(bins / ENBW)``."""
-        return 1.0 + SIGNIFICANCE / np.sqrt(max(self.bins, 1) / ENBW)
+        """Ratio beyond which the excess counts (:func:`threshold_ratio`)."""
+        return threshold_ratio(self.bins)
 
 
 def line_power(x) -> np.ndarray:
@@ -186,16 +184,9 @@ def check_band(n: int, dt: float, highpass_hz: float, cutoff_hz: float) -> np.nd
     return band if np.count_nonzero(band) >= MIN_BINS else None
 
 
-def _read_at(sample_time, samples, line_time) -> np.ndarray:
-    """Samples read at ``line_time`` by cubic interpolation (as the knowledge is read), clamped to their span."""
-    ts = np.asarray(sample_time, dtype=np.float64)
-    s = np.asarray(samples, dtype=np.float64)
-    return AttitudeSeries(ts, s, s, s).at(np.clip(np.asarray(line_time, dtype=np.float64), ts[0], ts[-1]))[0]
-
-
 def smoothed_knowledge_at(smoothing, values, line_time) -> np.ndarray:
     """The smoothed knowledge samples read at ``line_time`` (cubic, as the knowledge is read; clamped) [rad]."""
-    return _read_at(smoothing.time, smoothing.apply(values), line_time)
+    return samples_at_lines(smoothing.apply(values), smoothing.time, line_time)
 
 
 def knowledge_error_power(smoothing, line_time, mask, rng: np.random.Generator,
@@ -205,7 +196,7 @@ def knowledge_error_power(smoothing, line_time, mask, rng: np.random.Generator,
     zero)."""
     out = 0.0
     for _ in range(draws):
-        e = _read_at(smoothing.time, smoothing.error_draw(rng), line_time)
+        e = samples_at_lines(smoothing.error_draw(rng), smoothing.time, line_time)
         out = out + tapered_power(e, mask)
     return out / draws
 
@@ -225,11 +216,16 @@ def filter_error_power(knowledge_power, freq, *, cutoff_hz: float, order: int, k
     return np.where(np.abs(g) > 1e-6, np.abs(1.0 - g) ** 2 * s, 0.0)
 
 
+def threshold_ratio(bins: int) -> float:
+    """Observed over predicted power beyond which the excess counts: ``1 + SIGNIFICANCE / √(bins / ENBW)`` (two
+    relative spreads of a sum of ``bins`` tapered periodogram bins)."""
+    return 1.0 + SIGNIFICANCE / np.sqrt(max(bins, 1) / ENBW)
+
+
 def excess_variance(observed: float, images: float, knowledge: float, bins: int) -> float:
-    """The observed power beyond ``images + knowledge`` when the ratio exceeds ``1 + SIGNIFICANCE / √(bins / ENBW)``
-    (``bins`` tapered periodogram bins), else 0."""
+    """The observed power beyond ``images + knowledge`` when the ratio exceeds :func:`threshold_ratio`, else 0."""
     predicted = images + knowledge
-    if bins < 1 or not observed > predicted * (1.0 + SIGNIFICANCE / np.sqrt(bins / ENBW)):
+    if bins < 1 or not observed > predicted * threshold_ratio(bins):
         return 0.0
     return float(observed - predicted)
 

@@ -50,7 +50,7 @@ from simsat.attitude import AttitudeSeries
 from .synthesis import highpass_nan
 
 __all__ = ["KnowledgeSmoothing", "knowledge_smoothing", "wiener_shrinkage_gain", "lowband_correction",
-           "lowband", "DEFAULT_DEGREE", "DEFAULT_POOL", "MIN_SAMPLES"]
+           "lowband", "samples_at_lines", "DEFAULT_DEGREE", "DEFAULT_POOL", "MIN_SAMPLES"]
 
 #: degree of the polynomial kept whole (the record's offset, slope and curvature)
 DEFAULT_DEGREE = 2
@@ -167,13 +167,18 @@ def knowledge_smoothing(time, values, noise_rad: float, *, degree: int = DEFAULT
     return KnowledgeSmoothing(t, float(noise_rad), int(degree), wiener_shrinkage_gain(c, noise_rad, pool=pool))
 
 
-def lowband(samples, sample_time, line_time, *, line_period_s: float, highpass_hz: float) -> np.ndarray:
-    """What lies below the high-pass of sampled values read at the lines: cubic interpolation (as the product's
-    knowledge is read; clamped to the samples' span), minus its high-passed part (:func:`restore.synthesis.highpass_nan`) [rad]."""
+def samples_at_lines(samples, sample_time, line_time) -> np.ndarray:
+    """Sampled values read at the lines by cubic interpolation, as the product's knowledge is read, clamped to the
+    samples' span (a line a fraction of a sample beyond the telemetry's ends reads the end sample's value) [rad]."""
     s = np.asarray(samples, dtype=np.float64)
     ts = np.asarray(sample_time, dtype=np.float64)
-    # a line a fraction of a sample beyond the telemetry's ends reads the end sample's value
-    x = AttitudeSeries(ts, s, s, s).at(np.clip(np.asarray(line_time, dtype=np.float64), ts[0], ts[-1]))[0]
+    return AttitudeSeries(ts, s, s, s).at(np.clip(np.asarray(line_time, dtype=np.float64), ts[0], ts[-1]))[0]
+
+
+def lowband(samples, sample_time, line_time, *, line_period_s: float, highpass_hz: float) -> np.ndarray:
+    """What lies below the high-pass of sampled values read at the lines (:func:`samples_at_lines`), minus its
+    high-passed part (:func:`restore.synthesis.highpass_nan`) [rad]."""
+    x = samples_at_lines(samples, sample_time, line_time)
     if not highpass_hz > 0:
         return np.zeros(x.shape)
     return x - highpass_nan(x, dt=line_period_s, cutoff_hz=highpass_hz)
