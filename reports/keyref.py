@@ -157,6 +157,13 @@ MEANING = {
     "restoration.min_coverage": "least fraction of lines restored for the run to succeed",
     "restoration.knowledge_prior": "bound the estimated prior PSD by what the AOCS knowledge already knows "
                                    "(its recorded filter, rate and noise): nothing restored deep inside its band",
+    "restoration.knowledge_conditioning": "after the predicted σ, integrate each axis again with the prior of "
+    "the knowledge's error given the knowledge itself (k = G θ + ε and e = θ − k share ε): the conditional mean "
+    "h k is taken off the differentials and added back, the prior is S_θ N / (|G|² S_θ + N) (S_θ: the restored "
+    "angle's power less its predicted error's; N: the knowledge's recorded noise; G: its filter and spline "
+    "interpolation, counted only where at least ½), so where the attitude is quiet and the knowledge noisy the "
+    "images' noise no longer passes; then predict σ again. On by default; a product that does not record its "
+    "knowledge's filter and noise, or a method with no spectral prior, is not conditioned",
     "restoration.rematch": "coarse to fine: passes matching again in band B resampled into band A's geometry with "
                            "the estimate so far; \"auto\": one pass when the estimate moves by more than 0.3 px "
                            "per line (RMS: large amplitude), else none, and a second when that pass still "

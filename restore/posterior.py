@@ -622,7 +622,7 @@ def _draw_setup(record, samples: int, knowledge_noise_rad: float = 0.0, knowledg
     frequencies, PSD the attitudes are drawn from, lines drawn: the record plus the longest delay and lag).
 
     The draws' PSD is the record's prior raised to the AOCS knowledge's own white noise where that is
-    known (:func:`draw_psd`)."""
+    known (:func:`draw_psd`), unless the record's prior is conditioned on the knowledge."""
     if samples < 2:
         raise ValueError(f"samples: must be >= 2, got {samples}")
     d = np.asarray(record.diffs, dtype=np.float64)
@@ -632,7 +632,9 @@ def _draw_setup(record, samples: int, knowledge_noise_rad: float = 0.0, knowledg
     # is a good part of the total
     lags = [np.nan_to_num(np.asarray(lg, dtype=np.float64)) for lg in record.lags_s]
     freq, psd = _prior(record)
-    psd = draw_psd(freq, psd, knowledge_noise_rad, knowledge_rate_hz)
+    if not getattr(record, "knowledge_conditioned", False):
+        # a prior conditioned on the knowledge already holds what the knowledge's noise leaves
+        psd = draw_psd(freq, psd, knowledge_noise_rad, knowledge_rate_hz)
     ext = n + int(np.ceil((max(taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
     return d, np.isfinite(d), n, dt, taus, lags, freq, psd, ext
 

@@ -176,7 +176,8 @@ def _integration_variables(res: RestorationResult) -> tuple[dict, dict]:
         if rec.spectrum is not None:
             coords[f"prior_freq_{a}"] = (f"prior_freq_{a}", rec.spectrum.freq, {"units": "Hz"})
             data[f"prior_psd_{a}"] = (f"prior_freq_{a}", rec.spectrum.psd, {
-                "units": "rad2 s", "long_name": "PSD prior the method estimated from the data (two-sided)"})
+                "units": "rad2 s", "long_name": "PSD prior the method estimated from the data (two-sided)"
+                + (", given the AOCS knowledge" if rec.knowledge_conditioned else "")})
             nstd = np.full(len(names), np.nan)
             nstd[idx] = rec.spectrum.noise_std
             attrs = {"units": "rad"}
@@ -234,7 +235,8 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
              "integration": json.dumps({a: {"pairs": rec.pairs, "method": rec.method, "options": rec.options,
                                             "highpass_hz": rec.highpass_hz, "line_period_s": rec.line_period_s,
                                             "unobservable_rms_rad": rec.unobservable_rms_rad,
-                                            "floor_rms_rad": rec.floor_rms_rad, "selection": rec.selection}
+                                            "floor_rms_rad": rec.floor_rms_rad, "selection": rec.selection,
+                                            "knowledge_conditioned": bool(rec.knowledge_conditioned)}
                                         for a, rec in res.integration.items()}, sort_keys=True)}
     for a in AXES:
         attrs[f"coverage_{a}"] = res.coverage[a]
@@ -323,7 +325,8 @@ def _records_from(ds, info: dict) -> dict:
             highpass_hz=float(meta["highpass_hz"]), spectrum=spec, increment=_values(ds, f"increment_{a}"),
             previous=_values(ds, f"previous_estimate_{a}"),
             unobservable_rms_rad=float(meta.get("unobservable_rms_rad", float("nan"))),
-            floor_rms_rad=float(meta.get("floor_rms_rad", float("nan"))), selection=meta.get("selection"))
+            floor_rms_rad=float(meta.get("floor_rms_rad", float("nan"))), selection=meta.get("selection"),
+            knowledge_conditioned=bool(meta.get("knowledge_conditioned", False)))
     return out
 
 

@@ -67,6 +67,14 @@ class _NotesOnly(_Progress):
         self.note(label)
 
 
+def _take_records(records: dict, estimate: dict, new: dict) -> None:
+    """Put the axes of ``new`` (axis → IntegrationRecord) into ``records`` and their estimates
+    (``previous + increment``, NaN where not estimated) into ``estimate``, in place."""
+    for a, rec in new.items():
+        records[a] = rec
+        estimate[a] = np.where(np.isfinite(rec.increment), rec.previous + rec.increment, np.nan)
+
+
 class Restorer:
     """Restore the line-of-sight attitude of a product from its bands.
 
@@ -112,6 +120,8 @@ class Restorer:
                                                                    sigma, timings, bar)
             records, estimate, sigma = self.weigh_noise_colour(product, knowledge, records, estimate, sigma, timings,
                                                                 bar)
+            records, estimate, sigma = self.condition_on_knowledge(product, knowledge, records, estimate, sigma,
+                                                                    timings, bar)
             s = self.settings
             t = _time.perf_counter()
             if s.sigma_local_error and sigma:
@@ -312,14 +322,36 @@ class Restorer:
             if rec is not None:
                 weighted[a] = rec
         if weighted:
-            for a, rec in weighted.items():
-                records[a] = rec
-                estimate[a] = np.where(np.isfinite(rec.increment), rec.previous + rec.increment, np.nan)
+            _take_records(records, estimate, weighted)
             # checked again through the new filter: the weighted fit follows the data less where the colour
             # is, and its residual shows more of the noise there (reusing the first check's noise model
             # predicted σ lower: low_frequencies' pitch × 1.67 → 1.73, geo_noisy_knowledge's × 1.52 → 1.59)
             sigma = {**sigma, **stages.predicted_sigma(weighted, product, s)}
         timings["colour_weighting_s"] = _time.perf_counter() - t
+        return records, estimate, sigma
+
+    def condition_on_knowledge(self, product: Product, knowledge: dict, records: dict, estimate: dict,
+                               sigma: dict, timings: dict, bar) -> tuple:
+        """With ``knowledge_conditioning``: integrate each axis again with the prior given the AOCS knowledge
+        (:func:`stages.knowledge_conditioned`), then predict σ of those axes again through the new filter.
+
+        Returns (records, estimate, sigma), new where an axis was conditioned, as given otherwise.
+        """
+        s = self.settings
+        if not s.knowledge_conditioning or not sigma:
+            return records, estimate, sigma
+        t = _time.perf_counter()
+        done = {}
+        for a, rec in records.items():
+            new = stages.knowledge_conditioned(rec, sigma.get(a), product, knowledge[a], estimate[a], s)
+            if new is not None:
+                done[a] = new
+        if done:
+            bar.note("integrating again, with the prior given the AOCS knowledge")
+            records, estimate = dict(records), dict(estimate)
+            _take_records(records, estimate, done)
+            sigma = {**sigma, **stages.predicted_sigma(done, product, s)}
+        timings["knowledge_conditioning_s"] = _time.perf_counter() - t
         return records, estimate, sigma
 
     def lower_highpass(self, product: Product, pairs: list, knowledge: dict, records: dict, estimate: dict,

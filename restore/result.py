@@ -76,6 +76,9 @@ class IntegrationRecord:
     unobservable_rms_rad: float = float("nan")
     floor_rms_rad: float = float("nan")
     selection: dict | None = None  #: how ``method`` was chosen when restoration.method = "auto"
+    #: the prior is the one given the AOCS knowledge and ``previous`` its conditional mean
+    #: (:mod:`restore.knowledge_conditioning`): the draws take the attitude error from that prior as it is
+    knowledge_conditioned: bool = False
 
     def rerun(self, diffs=None, *, frozen: bool = True, lags=None, first_stage_gcv: bool = True) -> np.ndarray:
         """Integrate other differentials (true ones, noisy ones) through this axis's integration.

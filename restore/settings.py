@@ -55,6 +55,7 @@ class RestorationSettings:
     sigma_local_error: bool = True
     sigma_knowledge_check: bool = True
     knowledge_prior: bool = True
+    knowledge_conditioning: bool = True
     rematch: int | str = "auto"
     rematch_search: tuple = (2, 2)
     max_sigma_px: float | str = "auto"
@@ -149,6 +150,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.tdi_mean_attitude = sec.boolean("tdi_mean_attitude", s.tdi_mean_attitude)
     s.min_coverage = sec.number("min_coverage", s.min_coverage, ge=0, le=1)
     s.knowledge_prior = sec.boolean("knowledge_prior", s.knowledge_prior)
+    s.knowledge_conditioning = sec.boolean("knowledge_conditioning", s.knowledge_conditioning)
     s.noise_colour_weighting = sec.boolean("noise_colour_weighting", s.noise_colour_weighting)
     s.knowledge_noise_floor = sec.boolean("knowledge_noise_floor", s.knowledge_noise_floor)
     s.knowledge_smoothing = sec.boolean("knowledge_smoothing", s.knowledge_smoothing)

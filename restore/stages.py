@@ -27,10 +27,11 @@ from .observability import observability
 from .knowledge_prior import knowledge_noise_floor, knowledge_psd_ceiling
 from .exposure import exposure_deconvolution
 from .knowledge_check import knowledge_check, smoothed_knowledge_at
+from .knowledge_conditioning import knowledge_conditioning
 from .knowledge_smoothing import knowledge_smoothing, lowband_correction
 from .line_weights import gap_distance, residual_weight_factors, window_stretch
 from .local_noise import local_matching_error
-from .posterior import fit_residuals, larger_sigma, local_error_sigma, posterior_sigma
+from .posterior import fit_residuals, larger_sigma, local_error_sigma, posterior_sigma, simulated_differentials
 from .rematch import rematch_pair
 from .result import IntegrationRecord, PairData
 from .selection import estimate_image_noise, expected_matching_std, select_points_in_blocks
@@ -39,6 +40,7 @@ from .synthesis import (
     AXES,
     drop_sparse,
     fill_short_gaps,
+    highpass_nan,
     instant_synthesis,
     spikes,
     window_compensation,
@@ -46,7 +48,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -882,6 +884,52 @@ def predicted_sigma(records: dict, product: Product, settings: RestorationSettin
     return {a: posterior_sigma(rec, samples=settings.posterior_samples, seed=order.index(a),
                                knowledge_noise_rad=noise, knowledge_rate_hz=rate, knowledge_smoothing=smooth.get(a))
             for a, rec in sorted(records.items())}
+
+
+def knowledge_conditioned(record: IntegrationRecord, sigma, product: Product, knowledge: np.ndarray,
+                          estimate: np.ndarray, settings: RestorationSettings) -> IntegrationRecord | None:
+    """One axis integrated again with the prior given the AOCS knowledge (:mod:`restore.knowledge_conditioning`).
+
+    ``sigma`` (:class:`restore.posterior.PosteriorSigma`) gives the restored angle's predicted error power,
+    ``knowledge`` and ``estimate`` (lines,) [rad] the knowledge and the integration's estimate at the lines.
+    The conditional mean ``μ = h k`` (over the record and the longest delay beyond it, high-passed as the
+    integration's output) is taken off the differentials, the integration runs with its method's frozen options
+    and the conditional prior, and the new record has ``previous = μ``. None where it does not apply:
+    ``knowledge_conditioning`` off, a method with no spectral prior, no predicted error power, a product that
+    does not record its knowledge's filter and noise, or a record already holding an earlier estimate.
+    """
+    attrs = product.ds.attrs
+    if not settings.knowledge_conditioning or record.spectrum is None or sigma is None \
+            or sigma.error_power is None or product.knowledge_noise is None \
+            or "knowledge_cutoff_hz" not in attrs or "knowledge_filter_order" not in attrs \
+            or np.any(np.asarray(record.previous) != 0):
+        return None
+    noise_rad, rate_hz = product.knowledge_noise
+    if not (noise_rad > 0 and rate_hz > 0):
+        return None
+    dt = float(record.line_period_s)
+    n = np.asarray(record.diffs).shape[1]
+    cond = knowledge_conditioning(record.spectrum.freq, record.spectrum.psd, knowledge + estimate,
+                                  sigma.error_power, dt, cutoff_hz=float(attrs["knowledge_cutoff_hz"]),
+                                  order=int(attrs["knowledge_filter_order"]),
+                                  kind=str(attrs.get("knowledge_filter", "butterworth_zero_phase")),
+                                  rate_hz=rate_hz, noise_rad=noise_rad)
+    lags = [np.nan_to_num(np.asarray(lg, dtype=np.float64)) for lg in record.lags_s]
+    ext = n + int(np.ceil((max(record.taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
+    t = product.time[0] + np.arange(ext) * dt
+    series = product.knowledge
+    k_ext = series.at(np.clip(t, series.time[0], series.time[-1]))[AXES.index(record.axis)]
+    mu = cond.mean(k_ext, dt)
+    if record.highpass_hz > 0:
+        mu = highpass_nan(mu, dt=dt, cutoff_hz=record.highpass_hz)
+    diffs = np.asarray(record.diffs) - simulated_differentials(mu, record.taus, lags, np.isfinite(record.diffs), dt)
+    spec = replace(record.spectrum, psd=cond.variance)
+    opts = integration_method(record.method).frozen_options(record.options, spec)
+    theta = integrate_axis(list(diffs), list(record.taus), dt, method=record.method, options=opts,
+                           lags=list(record.lags_s), sigmas=list(record.sigmas), weights=list(record.weights),
+                           highpass_hz=record.highpass_hz).theta
+    return replace(record, diffs=diffs, spectrum=spec, increment=theta, previous=mu[:n],
+                   knowledge_conditioned=True)
 
 
 def raise_by_local_error(sigma: dict, records: dict, pairs: list, product: Product,

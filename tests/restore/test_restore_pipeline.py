@@ -806,3 +806,42 @@ def test_the_knowledge_check_raises_sigma_by_what_it_books_and_leaves_the_flags(
     restored, ks, k, power, kw = seen[0]
     np.testing.assert_array_equal(restored, res.restored["pitch"])
     assert kw["highpass_hz"] == res.integration["pitch"].highpass_hz and power is fake["pitch"].error_power
+
+
+def test_knowledge_conditioning_integrates_again_with_the_conditional_prior_and_round_trips(tiny_restored):
+    """The tiny run's axes are integrated again with the prior given the AOCS knowledge
+    (stages.knowledge_conditioned): the record says so, holds the conditional mean as its earlier estimate and
+    the differentials with that mean's taken off, restoration.nc gives all of it back and the recorded integration reproduces the estimate;
+    the stage declines with the setting off, and on a record already holding an earlier estimate."""
+    from dataclasses import replace
+    from restore import stages
+    from restore.posterior import PosteriorSigma
+    from restore.restoration_io import read_restoration
+    from simsat.product import read_product
+
+    d, res = tiny_restored
+    product = read_product(d)
+    s = res.settings
+    assert s.knowledge_conditioning          # the default
+    for a in ("roll", "pitch"):
+        rec = res.integration[a]
+        assert rec.knowledge_conditioned
+        assert np.any(rec.previous != 0) and np.all(np.isfinite(rec.previous))
+        np.testing.assert_allclose(rec.rerun(), rec.increment, rtol=0, atol=1e-12)
+        assert "given the AOCS knowledge" in xr.load_dataset(d / "restoration.nc")[f"prior_psd_{a}"].attrs["long_name"]
+    back = read_restoration(d / "restoration.nc")
+    assert back.integration["pitch"].knowledge_conditioned
+    np.testing.assert_allclose(back.integration["pitch"].previous, res.integration["pitch"].previous)
+    rec = res.integration["pitch"]
+    off = replace(s, knowledge_conditioning=False)
+    assert stages.knowledge_conditioned(rec, object(), product, res.knowledge["pitch"], rec.increment, off) is None
+    assert stages.knowledge_conditioned(rec, None, product, res.knowledge["pitch"], rec.increment, s) is None
+    n = res.time.size
+    ps = PosteriorSigma(sigma=np.full(n, 1e-8), noise_scale=1.0, samples=2, error_power=np.full(n // 2 + 1, 1e-18))
+    again = stages.knowledge_conditioned(replace(rec, previous=np.zeros(n), knowledge_conditioned=False), ps, product,
+                                         res.knowledge["pitch"], rec.increment, s)
+    assert again is not None and again.knowledge_conditioned
+    # an earlier estimate (iterations) is not what the conditional mean is taken from: declined
+    assert stages.knowledge_conditioned(rec, ps, product, res.knowledge["pitch"], rec.increment, s) is None
+    with pytest.raises(ScenarioError, match="knowledge_conditioning"):
+        restoration_settings({"knowledge_conditioning": "yes"})
