@@ -374,6 +374,7 @@ def test_a_sigma_limit_below_every_line_flags_them_all_and_says_so(tiny_restored
         restore_run(run, progress=False, overrides={"max_sigma_px": 1e-6})
 
 
+@pytest.mark.slow  # a full restore of its own (or two): 15–30 s on 2 cores
 def test_noise_colour_weighting_integrates_again_and_the_file_keeps_the_colour(tiny_restored, tmp_path):
     """restoration.noise_colour_weighting (on by default): the same differentials and prior as without it,
     integrated again with the residual weighed by the colour the knowledge proves noise (≥ 1); the colour is
@@ -384,7 +385,11 @@ def test_noise_colour_weighting_integrates_again_and_the_file_keeps_the_colour(t
     d, on = tiny_restored
     run = tmp_path / "tiny"
     shutil.copytree(d, run)
-    off = restore_run(run, progress=False, overrides={"noise_colour_weighting": False, "correct_images": False})
+    # the integration conditioned on the knowledge afterwards (on by default) takes its mean off the
+    # differentials: compared here without it, where the weighting's own record is the last
+    plain = {"knowledge_conditioning": False, "correct_images": False}
+    weighed = restore_run(run, progress=False, overrides=plain)
+    off = restore_run(run, progress=False, overrides={**plain, "noise_colour_weighting": False})
     assert not any(k.startswith("prior_noise_colour") for k in xr.load_dataset(run / "restoration.nc").data_vars)
     assert "colour_weighting_s" in on.timings and "colour_weighting_s" not in off.timings
     weighted = [a for a, rec in on.integration.items() if rec.spectrum.noise_colour is not None]
@@ -394,9 +399,10 @@ def test_noise_colour_weighting_integrates_again_and_the_file_keeps_the_colour(t
         rec = on.integration[a]
         assert off.integration[a].spectrum.noise_colour is None
         assert np.all(rec.spectrum.noise_colour[1] >= 1.0) and np.any(rec.spectrum.noise_colour[1] > 1.0)
-        np.testing.assert_array_equal(rec.diffs, off.integration[a].diffs)
-        np.testing.assert_array_equal(rec.spectrum.psd, off.integration[a].spectrum.psd)
-        assert not np.array_equal(rec.increment, off.integration[a].increment)
+        w = weighed.integration[a]
+        np.testing.assert_array_equal(w.diffs, off.integration[a].diffs)
+        np.testing.assert_array_equal(w.spectrum.psd, off.integration[a].spectrum.psd)
+        assert not np.array_equal(w.increment, off.integration[a].increment)
         got = back.integration[a]
         for x, y in zip(got.spectrum.noise_colour, rec.spectrum.noise_colour):
             np.testing.assert_array_equal(x, y)
@@ -409,6 +415,7 @@ def test_noise_colour_weighting_integrates_again_and_the_file_keeps_the_colour(t
     assert all(rec.spectrum.noise_colour is None for rec in bare.integration.values())
 
 
+@pytest.mark.slow  # a full restore of its own (or two): 15–30 s on 2 cores
 def test_the_local_matching_error_raises_the_predicted_sigma_where_larger(tiny_restored, tmp_path):
     """restoration.sigma_local_error (on by default): σ per line is the larger of the residual-calibrated
     prediction (the same with it off: same seeds) and the one with the local matching error measured from
@@ -550,6 +557,7 @@ def test_star_tracker_anchoring_removes_a_knowledge_bias(tmp_path):
         assert absolute[True][a] < 1.5 * ifov
 
 
+@pytest.mark.slow  # a full restore of its own (or two): 15–30 s on 2 cores
 def test_small_dedicated_detector_restores_from_the_shared_columns_only(tmp_path):
     """Claim 20: a main strip and a small detector behind it, sharing a few of its columns. Points are
     selected in those columns only (before: '0 candidates' / 'no line could be synthesised')."""
