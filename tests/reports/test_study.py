@@ -110,6 +110,7 @@ def test_study_on_a_local_cluster_of_two_workers(study_file, tmp_path):
     pd.testing.assert_frame_equal(_table(res["paths"]["parquet"]), _table(again["paths"]["parquet"]))
 
 
+@pytest.mark.slow  # 45 s on 2 cores (a study killed mid-run and resumed); runs with -m slow
 def test_killed_and_restarted_gives_the_uninterrupted_table(study_file, tmp_path):
     """A `simsat study` process killed once its first rows are written, then started again, ends with the
     table of an uninterrupted run; no row file is written twice."""

@@ -66,7 +66,8 @@ def test_wiener_refuses_lags_of_the_wrong_shape():
         integrate_wiener(diffs, TAUS, DT, lags=lags[:2])
 
 
-@pytest.mark.parametrize("amplitude", [6e-6, pytest.param(10e-6, marks=pytest.mark.slow)])
+# 45–60 s each on 2 cores: slow (the lags are modelled in every restore of tests/restore/test_restore_pipeline.py)
+@pytest.mark.parametrize("amplitude", [pytest.param(6e-6, marks=pytest.mark.slow), pytest.param(10e-6, marks=pytest.mark.slow)])
 def test_pipeline_integration_models_the_lags_rather_than_correcting_the_data(monkeypatch, amplitude):
     """integrate_axis with the Wiener (prior_lags): the prior from differentials corrected once, then the
     measured ones with the lags modelled, beats the correction alone (the first fit's error times the lag)."""
