@@ -923,13 +923,9 @@ def knowledge_conditioned(record: IntegrationRecord, sigma, product: Product, kn
     if record.highpass_hz > 0:
         mu = highpass_nan(mu, dt=dt, cutoff_hz=record.highpass_hz)
     diffs = np.asarray(record.diffs) - simulated_differentials(mu, record.taus, lags, np.isfinite(record.diffs), dt)
-    spec = replace(record.spectrum, psd=cond.variance)
-    opts = integration_method(record.method).frozen_options(record.options, spec)
-    theta = integrate_axis(list(diffs), list(record.taus), dt, method=record.method, options=opts,
-                           lags=list(record.lags_s), sigmas=list(record.sigmas), weights=list(record.weights),
-                           highpass_hz=record.highpass_hz).theta
-    return replace(record, diffs=diffs, spectrum=spec, increment=theta, previous=mu[:n],
-                   knowledge_conditioned=True)
+    new = replace(record, diffs=diffs, spectrum=replace(record.spectrum, psd=cond.variance), previous=mu[:n],
+                  knowledge_conditioned=True)
+    return replace(new, increment=new.rerun())   # the method's frozen options, with the conditional prior
 
 
 def raise_by_local_error(sigma: dict, records: dict, pairs: list, product: Product,
