@@ -635,8 +635,13 @@ def _draw_setup(record, samples: int, knowledge_noise_rad: float = 0.0, knowledg
     if not getattr(record, "knowledge_conditioned", False):
         # a prior conditioned on the knowledge already holds what the knowledge's noise leaves
         psd = draw_psd(freq, psd, knowledge_noise_rad, knowledge_rate_hz)
-    ext = n + int(np.ceil((max(taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
-    return d, np.isfinite(d), n, dt, taus, lags, freq, psd, ext
+    return d, np.isfinite(d), n, dt, taus, lags, freq, psd, extended_lines(n, taus, lags, dt)
+
+
+def extended_lines(n: int, taus, lags, dt: float) -> int:
+    """Lines an attitude series needs for a record of ``n`` lines' differentials: the record, its longest delay
+    and per-line lag beyond it, and a margin of 8 lines (``lags``: per pair, (lines,) [s], no NaN)."""
+    return n + int(np.ceil((max(float(t) for t in taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
 
 
 def draw_psd(freq, psd, knowledge_noise_rad: float = 0.0, knowledge_rate_hz: float | None = None) -> np.ndarray:

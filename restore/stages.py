@@ -31,7 +31,8 @@ from .knowledge_conditioning import knowledge_conditioning
 from .knowledge_smoothing import knowledge_smoothing, lowband_correction
 from .line_weights import gap_distance, residual_weight_factors, window_stretch
 from .local_noise import local_matching_error
-from .posterior import fit_residuals, larger_sigma, local_error_sigma, posterior_sigma, simulated_differentials
+from .posterior import (extended_lines, fit_residuals, larger_sigma, local_error_sigma, posterior_sigma,
+                        simulated_differentials)
 from .rematch import rematch_pair
 from .result import IntegrationRecord, PairData
 from .selection import estimate_image_noise, expected_matching_std, select_points_in_blocks
@@ -915,7 +916,7 @@ def knowledge_conditioned(record: IntegrationRecord, sigma, product: Product, kn
                                   kind=str(attrs.get("knowledge_filter", "butterworth_zero_phase")),
                                   rate_hz=rate_hz, noise_rad=noise_rad)
     lags = [np.nan_to_num(np.asarray(lg, dtype=np.float64)) for lg in record.lags_s]
-    ext = n + int(np.ceil((max(record.taus) + max(float(np.max(np.abs(lg))) for lg in lags)) / dt)) + 8
+    ext = extended_lines(n, record.taus, lags, dt)
     t = product.time[0] + np.arange(ext) * dt
     series = product.knowledge
     k_ext = series.at(np.clip(t, series.time[0], series.time[-1]))[AXES.index(record.axis)]

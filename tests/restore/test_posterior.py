@@ -429,3 +429,12 @@ def test_draw_psd_is_the_prior_raised_to_the_knowledges_white_noise():
     assert out[0] == pytest.approx(0.3e-6 ** 2 / 64.0)
     np.testing.assert_array_equal(draw_psd(f, prior, 0.0, 64.0), prior)
     np.testing.assert_array_equal(draw_psd(f, prior, 0.3e-6, None), prior)
+
+
+def test_extended_lines_hold_the_longest_delay_and_lag_beyond_the_record():
+    """A 10 ms delay and lags up to 3 ms at 1 ms a line: 13 lines beyond the record, and the 8-line margin."""
+    from restore.posterior import extended_lines
+
+    lags = [np.array([0.002, -0.003]), np.zeros(2)]
+    assert extended_lines(100, [0.004, 0.01], lags, 0.001) == 100 + 13 + 8
+    assert extended_lines(100, [0.01], [np.zeros(2)], 0.001) == 100 + 10 + 8
