@@ -123,15 +123,21 @@ def periodic_highpass(theta: np.ndarray, grid: np.ndarray, *, dt: float, cutoff_
     under a 0.4 Hz high-pass: 0.07 px of pitch error, none with the true
     differentials and no high-pass). On the grid the MAP solved, the estimate
     continues over the padding back to its start: the filter wraps around it
-    and never meets an end. The record's lines the method leaves NaN (its
-    first and last lines, a gap) keep the grid's value for the low-pass — the
-    MAP's own estimate there, its conditional mean — and are NaN again in the
-    output: taken as missing, they cut a hole in the estimate's oscillations
-    that the normalised convolution averaged around, putting back a slow drift
-    (at 2.7 px of CMG jitter, with a dozen unestimated lines at each end of
-    large_amplitude's record, its posterior draws erred by 0.065 / 0.074 px
-    roll / pitch over the last 90 lines, 0.032 / 0.040 px with the grid's
-    values; 0.018 / 0.021 px in the middle either way).
+    and never meets an end. The lines the method leaves NaN at the record's
+    ends (before its first estimated line, after its last) keep the grid's
+    value for the low-pass, as the padding does — the MAP's own estimate
+    there, its conditional mean — and are NaN again in the output: taken as
+    missing, they cut a hole between the record and its padding in the
+    estimate's oscillations, which the normalised convolution averaged
+    around into a slow drift (at 2.7 px of CMG jitter, with a dozen such
+    lines at each end of large_amplitude's record, its posterior draws erred
+    by 0.065 / 0.074 px roll / pitch over the last 90 lines, 0.032 / 0.040 px
+    with the grid's values; 0.018 / 0.021 px in the middle either way). Gaps
+    inside the record stay missing data (normalised convolution), as they are
+    for :func:`highpass_nan`: over a long gap the grid holds little more than
+    the prior's mean, and taking it as the estimate there biased the low-pass
+    beside clouds (an unseen clouds + low sun scene: 0.0490 → 0.0515 px of
+    pitch error on the same lines).
     """
     th = np.asarray(theta, dtype=np.float64)
     ext = np.asarray(grid, dtype=np.float64).copy()
@@ -141,7 +147,10 @@ def periodic_highpass(theta: np.ndarray, grid: np.ndarray, *, dt: float, cutoff_
     # the record's mean was removed over its estimable samples only: bring the grid to the same level, or the
     # joins would be steps that the wrapped low-pass spreads back into the record's ends
     ext += float(np.mean(th[ok] - ext[:th.size][ok]))
-    ext[:th.size][ok] = th[ok]
+    idx = np.flatnonzero(ok)
+    inside = np.zeros(th.size, dtype=bool)
+    inside[idx[0]:idx[-1] + 1] = True
+    ext[:th.size] = np.where(ok | ~inside, np.where(ok, th, ext[:th.size]), np.nan)   # gaps stay missing
     hp = highpass_nan(ext, dt=dt, cutoff_hz=cutoff_hz, mode="wrap")[:th.size]
     hp[~ok] = np.nan
     return hp - np.mean(hp[ok])

@@ -102,11 +102,12 @@ def test_periodic_highpass_brings_the_padding_to_the_records_level():
     np.testing.assert_allclose(a, b, atol=1e-12, equal_nan=True)
 
 
-def test_periodic_highpass_fills_the_unestimated_lines_with_the_grids_estimate():
+def test_periodic_highpass_fills_the_records_unestimated_end_lines_with_the_grids_estimate():
     """Large CMG-like lines (50–150 Hz) under a 2 Hz high-pass: nothing lies below the cut-off, so the
-    high-pass gives the record back. The lines the method leaves NaN (a dozen at each end, a short gap) take
-    the grid's estimate in the low-pass; as missing samples they cut holes in the oscillation that the
-    normalised convolution averages around, a slow drift near them."""
+    high-pass gives the record back. The lines the method leaves NaN at the record's ends take the grid's
+    estimate in the low-pass, as the padding beyond them does; as missing samples they cut a hole between
+    the record and its padding that the normalised convolution averages around, a slow drift beside it.
+    A gap inside the record stays missing data."""
     from restore.axis_integration import periodic_highpass
 
     dt, n, m = 4e-4, 4000, 6000
@@ -115,16 +116,26 @@ def test_periodic_highpass_fills_the_unestimated_lines_with_the_grids_estimate()
     grid = sum(a * np.sin(2 * np.pi * c * k / m + ph)
                for a, c, ph in ((3.0, 127, 0.3), (2.0, 141, 1.1), (1.5, 178, 2.0), (1.0, 296, 0.7)))
     theta = grid[:n] - np.mean(grid[12:n - 12])
-    theta[:12] = theta[-12:] = theta[2000:2010] = np.nan
+    theta[:12] = theta[-12:] = np.nan
     ok = np.isfinite(theta)
     hp = periodic_highpass(theta, grid, dt=dt, cutoff_hz=2.0)
     assert np.array_equal(np.isfinite(hp), ok)
     expected = theta - np.nanmean(theta)
     err = np.abs(hp - expected)[ok]
-    # the same grid with the record's NaN lines as missing samples of the wrapped low-pass
+    # the same grid with the record's end lines as missing samples of the wrapped low-pass
     holes = grid - np.mean(grid[:n][ok]) + np.nanmean(theta)
     holes[:n][~ok] = np.nan
     missing = highpass_nan(holes, dt=dt, cutoff_hz=2.0, mode="wrap")[:n]
     missing_err = np.abs(missing - np.nanmean(missing[ok]) - expected)[ok]
     assert np.max(missing_err[-200:]) > 0.01          # the drift the holes make (a 3-unit line)
     assert np.max(err) < 1e-3 * np.max(missing_err)
+
+    gappy = theta.copy()
+    gappy[2000:2010] = np.nan                         # a gap inside the record: missing, as highpass_nan has it
+    inner = periodic_highpass(gappy, grid, dt=dt, cutoff_hz=2.0)
+    assert np.array_equal(np.isfinite(inner), np.isfinite(gappy))
+    ref = grid - np.mean(grid[:n][np.isfinite(gappy)]) + np.nanmean(gappy)
+    ref[2000:2010] = np.nan
+    ref = highpass_nan(ref, dt=dt, cutoff_hz=2.0, mode="wrap")[:n]
+    ref[~np.isfinite(gappy)] = np.nan
+    np.testing.assert_allclose(inner, ref - np.nanmean(ref), atol=1e-12, equal_nan=True)
