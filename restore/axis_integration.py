@@ -147,10 +147,10 @@ def periodic_highpass(theta: np.ndarray, grid: np.ndarray, *, dt: float, cutoff_
     # the record's mean was removed over its estimable samples only: bring the grid to the same level, or the
     # joins would be steps that the wrapped low-pass spreads back into the record's ends
     ext += float(np.mean(th[ok] - ext[:th.size][ok]))
-    idx = np.flatnonzero(ok)
-    inside = np.zeros(th.size, dtype=bool)
-    inside[idx[0]:idx[-1] + 1] = True
-    ext[:th.size] = np.where(ok | ~inside, np.where(ok, th, ext[:th.size]), np.nan)   # gaps stay missing
+    record = ext[:th.size]                    # a view: the record's lines of the grid
+    record[ok] = th[ok]
+    first, last = np.flatnonzero(ok)[[0, -1]]
+    record[first:last + 1][~ok[first:last + 1]] = np.nan    # gaps inside the record stay missing
     hp = highpass_nan(ext, dt=dt, cutoff_hz=cutoff_hz, mode="wrap")[:th.size]
     hp[~ok] = np.nan
     return hp - np.mean(hp[ok])
