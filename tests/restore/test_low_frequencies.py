@@ -103,7 +103,7 @@ def test_periodic_highpass_brings_the_padding_to_the_records_level():
 
 
 def test_periodic_highpass_fills_the_records_unestimated_end_lines_with_the_grids_estimate():
-    """Large CMG-like lines (50–150 Hz) under a 2 Hz high-pass: nothing lies below the cut-off, so the
+    """Large CMG-like lines (53–123 Hz) under a 2 Hz high-pass: nothing lies below the cut-off, so the
     high-pass gives the record back. The lines the method leaves NaN at the record's ends take the grid's
     estimate in the low-pass, as the padding beyond them does; as missing samples they cut a hole between
     the record and its padding that the normalised convolution averages around, a slow drift beside it.
