@@ -87,7 +87,7 @@ __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", 
            "knowledge_noise_below", "draw_psd", "pair_bands", "SharedBandNoise", "shared_band_noise",
            "correlated_noise",
            "detrended", "detrended_rms", "detrended_rms_over", "local_error_sigma", "larger_sigma",
-           "mean_error_power"]
+           "mean_error_power", "knowledge_error_draws", "KNOWLEDGE_DRAWS"]
 
 
 #: the real fit residual may exceed the simulated one by this factor before the noise is inflated
@@ -586,8 +586,7 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
             th, ref = _prior_and_reference(record, freq, psd, ext, rng)
             ds = simulated_differentials(th, taus, lags, valid, dt) + correlated_noise(noise, colour, shared, dt, rng)
             est = record.rerun(ds, first_stage_gcv=False)
-            errs.append(_draw_error(record, est, ref, krng, knowledge_noise_rad, knowledge_rate_hz,
-                                    knowledge_smoothing))
+            errs.append(_draw_error(est, ref))
             if check:
                 resid.append(band_power(fit_residuals(ds, est, taus, lags, dt, highpass_hz=record.highpass_hz),
                                         edges))
@@ -609,11 +608,11 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
             _, sim = run(None, samples, True, shared)
         estimate = noise_colour_estimate(real, np.mean(sim, axis=0), edges, n, draws=len(sim))
         errs, _ = run(estimate, samples, False, shared)
-    return PosteriorSigma(sigma=np.sqrt(_line_variance(errs, smooth_lines)), noise_scale=float(scale),
-                          samples=int(samples), noise_colour=colour, detrended_rms=detrended_rms(errs),
-                          detrended_sigma=np.sqrt(_line_variance(detrended(errs), smooth_lines)),
+    kerrs = knowledge_error_draws(record, np.isfinite(errs).any(axis=0), krng, knowledge_noise_rad=knowledge_noise_rad,
+                                  knowledge_rate_hz=knowledge_rate_hz, knowledge_smoothing=knowledge_smoothing)
+    return PosteriorSigma(noise_scale=float(scale), samples=int(samples), noise_colour=colour,
                           band_shares=shared.band_shares() if shared is not None else {},
-                          colour_estimate=estimate, error_power=mean_error_power(errs))
+                          colour_estimate=estimate, **_summary(errs, kerrs, smooth_lines))
 
 
 def _draw_setup(record, samples: int, knowledge_noise_rad: float = 0.0, knowledge_rate_hz: float | None = None
@@ -680,20 +679,66 @@ def _knowledge_rng(seed: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(seed), 0x4B4E]))
 
 
-def _draw_error(record, est: np.ndarray, ref: np.ndarray, rng, knowledge_noise_rad: float,
-                knowledge_rate_hz: float | None, knowledge_smoothing=None) -> np.ndarray:
-    """A draw's error: estimate − reference, plus the knowledge noise below the high-pass (what its smoothing
-    leaves of it, with ``knowledge_smoothing``), mean removed."""
+def _draw_error(est: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """A draw's error from the images: estimate − reference, mean removed (the knowledge's noise below the
+    high-pass is drawn apart: :func:`knowledge_error_draws`)."""
     e = est - ref
-    if knowledge_smoothing is not None:
-        dt = float(record.line_period_s)
-        e = e + lowband(knowledge_smoothing.error_draw(rng), knowledge_smoothing.time, np.arange(e.size) * dt,
-                        line_period_s=dt, highpass_hz=record.highpass_hz)
-    elif knowledge_noise_rad > 0 and knowledge_rate_hz:
-        e = e + knowledge_noise_below(e.size, float(record.line_period_s), record.highpass_hz, knowledge_noise_rad,
-                                      knowledge_rate_hz, rng)
     ok = np.isfinite(e)
     return e - np.mean(e[ok]) if ok.any() else e
+
+
+#: draws of the AOCS knowledge's noise below the high-pass per prediction (:func:`knowledge_error_draws`): each
+#: costs a low-pass, not an integration, so they are many more than the images' draws
+KNOWLEDGE_DRAWS = 256
+
+
+def knowledge_error_draws(record, lines: np.ndarray, rng: np.random.Generator, *, knowledge_noise_rad: float = 0.0,
+                          knowledge_rate_hz: float | None = None, knowledge_smoothing=None,
+                          draws: int = KNOWLEDGE_DRAWS) -> np.ndarray | None:
+    """Draws (draw, line) [rad] of the AOCS knowledge's noise the restored angle keeps below the high-pass: what
+    its smoothing leaves (``knowledge_smoothing``,
+    :meth:`~restore.knowledge_smoothing.KnowledgeSmoothing.error_draw`) or the raw white noise
+    (:func:`knowledge_noise_below`), each draw's mean over ``lines`` (bool, the restored lines) removed and NaN
+    elsewhere. None when the knowledge's noise is not counted (neither given, or no high-pass).
+
+    The restored angle's error is the images' part plus this one, independent of it: its variance adds to the
+    images' draws'. Drawn apart, it is not held to the few draws an integration costs — on a short record the
+    smoothing leaves a few degrees of freedom of this noise (the polynomial it keeps whole), whose spread
+    eight draws estimate to ± 25 %.
+    """
+    m = np.asarray(lines, dtype=bool)
+    dt = float(record.line_period_s)
+    if not record.highpass_hz > 0 or not m.any():
+        return None
+    if knowledge_smoothing is not None:
+        def one():
+            return lowband(knowledge_smoothing.error_draw(rng), knowledge_smoothing.time, np.arange(m.size) * dt,
+                           line_period_s=dt, highpass_hz=record.highpass_hz)
+    elif knowledge_noise_rad > 0 and knowledge_rate_hz:
+        def one():
+            return knowledge_noise_below(m.size, dt, record.highpass_hz, knowledge_noise_rad, knowledge_rate_hz, rng)
+    else:
+        return None
+    out = np.array([one() for _ in range(int(draws))])
+    out = out - out[:, m].mean(axis=1, keepdims=True)
+    out[:, ~m] = np.nan
+    return out
+
+
+def _summary(errs: np.ndarray, kerrs: np.ndarray | None, smooth_lines: int) -> dict:
+    """The prediction's figures from the images' error draws and, independent of them, the knowledge's
+    (:func:`knowledge_error_draws`, or None): variances, mean squares and mean periodograms add."""
+    parts = [np.asarray(errs, dtype=np.float64)] + ([] if kerrs is None else [kerrs])
+
+    def total(f):
+        return sum(f(p) for p in parts)
+
+    det = [detrended(p) for p in parts]
+    return {"sigma": np.sqrt(total(lambda p: _line_variance(p, smooth_lines))),
+            "detrended_sigma": np.sqrt(sum(_line_variance(d, smooth_lines) for d in det)),
+            "detrended_rms": float(np.sqrt(sum(np.nanmean(d ** 2) for d in det)))
+            if all(np.isfinite(d).any() for d in det) else float("nan"),
+            "error_power": total(mean_error_power)}
 
 
 def local_error_sigma(record, local: np.ndarray, *, samples: int = 8, seed: int = 0, smooth_lines: int = 31,
@@ -731,12 +776,11 @@ def local_error_sigma(record, local: np.ndarray, *, samples: int = 8, seed: int 
         phase[0] = 0.0
         noise = np.where(valid, irfft(spec * phase, n=n, axis=-1), np.nan)
         est = record.rerun(simulated_differentials(th, taus, lags, valid, dt) + noise, first_stage_gcv=False)
-        errs.append(_draw_error(record, est, ref, krng, knowledge_noise_rad, knowledge_rate_hz, knowledge_smoothing))
+        errs.append(_draw_error(est, ref))
     errs = np.array(errs)
-    return PosteriorSigma(sigma=np.sqrt(_line_variance(errs, smooth_lines)), noise_scale=1.0, samples=int(samples),
-                          detrended_rms=detrended_rms(errs),
-                          detrended_sigma=np.sqrt(_line_variance(detrended(errs), smooth_lines)),
-                          error_power=mean_error_power(errs))
+    kerrs = knowledge_error_draws(record, np.isfinite(errs).any(axis=0), krng, knowledge_noise_rad=knowledge_noise_rad,
+                                  knowledge_rate_hz=knowledge_rate_hz, knowledge_smoothing=knowledge_smoothing)
+    return PosteriorSigma(noise_scale=1.0, samples=int(samples), **_summary(errs, kerrs, smooth_lines))
 
 
 def mean_error_power(errs: np.ndarray) -> np.ndarray:

@@ -406,7 +406,7 @@ class _AxisBudget:
             if rec is not None and local is not None:
                 el = np.where(mask, rec.rerun(self.meas + local) - rec.rerun(), np.nan)
                 rows.append(_stats_row("local matching error", a, el, ifov,
-                                       "integrate(measured + local) − integrate(measured); local: half the "
+                                       "integrate(measured + local) − integrate(measured); local: the scaled "
                                        "difference of two interleaved halves of the swath"))
                 ser["local matching error"] = el
             return rows
@@ -445,7 +445,7 @@ class _AxisBudget:
             if anchored:
                 el = el - record_trend(el)
             r_local = _stats_row("local matching error", a, el, ifov,
-                                 "integrate(true + local) − integrate(true); local: half the difference of two "
+                                 "integrate(true + local) − integrate(true); local: the scaled difference of two "
                                  "interleaved halves of the swath")
             rows.append(r_local)
             rows.append(_quad_row("line-common error", a, r_meas, r_local, "√(measurement² − local²)"))

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from restore.local_noise import interleaved_halves, local_matching_error
+from restore.local_noise import balance_scale, interleaved_halves, local_matching_error
 from restore.result import PairData
 
 N_LINES = 3000
@@ -82,3 +82,31 @@ def test_points_all_in_one_block_give_no_estimate():
     pair.valid &= pair.col_a == COLS[0]
     local = local_matching_error(pair, sens[pair.valid], n_lines=N_LINES, axes=("roll", "pitch"), block_columns=62)
     assert np.all(np.isnan(local))
+
+
+def test_unequal_halves_are_scaled_to_the_full_fits_local_error():
+    """Three points of four in one half: the full fit's local error is still σ/√N, half the halves' difference
+    has σ·√(1/n_A + 1/n_B)/2 (15 % more here); the halves' information-weighted scale gives σ/√N back."""
+    rng = np.random.default_rng(9)
+    sigma = 0.3
+    pair, sens = _pair(np.zeros(N_LINES), np.zeros(N_LINES), sigma, rng)
+    block = np.floor(pair.col_a / 62).astype(int) % 2            # 0: half A, 1: half B (blocks of 62 columns)
+    # keep every point of half A and one in three of half B's: 18 and 6 points per line
+    b_index = np.cumsum(block) * block
+    pair.valid &= (block == 0) | (b_index % 3 == 0)
+    v = pair.valid
+    n_a = int(np.count_nonzero(v & (block == 0))) // N_LINES
+    n_b = int(np.count_nonzero(v & (block == 1))) // N_LINES
+    local = local_matching_error(pair, sens[v], n_lines=N_LINES, axes=("roll", "pitch"), block_columns=62,
+                                 min_points=2, n_sigma=10.0)
+    expected = sigma / np.sqrt(n_a + n_b)
+    naive = sigma * np.sqrt(1 / n_a + 1 / n_b) / 2
+    assert naive > 1.1 * expected
+    assert np.std(local[:, 1] * S_LINE) == pytest.approx(expected, rel=0.06)
+    assert np.std(local[:, 0] * S_COL) == pytest.approx(expected, rel=0.06)
+
+
+def test_balance_scale_is_one_half_for_equal_halves_and_nan_where_a_half_is():
+    assert balance_scale([2.0], [2.0])[0] == pytest.approx(0.5)
+    assert balance_scale([1.0], [2.0])[0] == pytest.approx(2.0 / 5.0)
+    assert np.isnan(balance_scale([np.nan], [1.0])[0])
