@@ -194,7 +194,7 @@ MEANING = {
     "restoration.posterior_samples": "Monte Carlo draws through the integration for the predicted 1-σ per line "
                                      "(restoration.nc sigma_<axis>); 0: none",
     "restoration.sigma_local_error": "predict σ also with the measured local matching error as the noise (the "
-    "differentials fitted again from two interleaved halves of the swath, half their difference, integrated "
+    "differentials fitted again from two interleaved halves of the swath, their difference scaled by the halves' information (½ for equal halves), integrated "
     "through the frozen filter) and keep, line by line, the larger of that and the residual-calibrated "
     "prediction: each misses what the other holds (an error moving like an attitude, an error every point of "
     "a line shares)",

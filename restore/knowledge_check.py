@@ -59,7 +59,7 @@ from .knowledge_prior import knowledge_noise_floor, knowledge_response
 from .knowledge_smoothing import samples_at_lines
 from .synthesis import highpass_gain
 
-__all__ = ["KnowledgeCheck", "line_power", "tapered_power", "check_band", "smoothed_knowledge_at",
+__all__ = ["KnowledgeCheck", "line_power", "tapered_power", "tapered_power_rows", "check_band", "smoothed_knowledge_at",
            "knowledge_error_power",
            "filter_error_power", "threshold_ratio", "excess_variance", "knowledge_check", "MIN_BINS", "SIGNIFICANCE",
            "LOW_FACTOR", "HIGH_FRACTION", "ENBW"]
@@ -173,6 +173,25 @@ def tapered_power(x, mask) -> np.ndarray:
     v = v - np.polyval(np.polyfit(u[m], v[m], 2), u)
     w = np.hanning(v.size)
     return line_power(np.where(m, v * w, np.nan)) / np.mean(w ** 2)
+
+
+def tapered_power_rows(x, mask) -> np.ndarray:
+    """:func:`tapered_power` of each row of ``x`` (row, line) on the same lines ``mask`` (each row finite there),
+    summed over the rows."""
+    v = np.atleast_2d(np.asarray(x, dtype=np.float64))
+    m = np.asarray(mask, dtype=bool)
+    n = v.shape[1]
+    if np.count_nonzero(m) < 3:
+        return np.zeros(n // 2 + 1)
+    u = np.linspace(-1.0, 1.0, n)
+    a = np.vander(u, 3)
+    coef, *_ = np.linalg.lstsq(a[m], v[:, m].T, rcond=None)
+    w = np.hanning(n)
+    y = (v - (a @ coef).T) * w
+    y = np.where(m, y - y[:, m].mean(axis=1, keepdims=True), 0.0)
+    p = np.abs(np.fft.rfft(y, axis=1)) ** 2 / n ** 2
+    p[:, 1:(n + 1) // 2] *= 2.0
+    return p.sum(axis=0) / np.mean(w ** 2)
 
 
 def check_band(n: int, dt: float, highpass_hz: float, cutoff_hz: float) -> np.ndarray | None:

@@ -50,7 +50,7 @@ from simsat.attitude import AttitudeSeries
 from .synthesis import highpass_nan
 
 __all__ = ["KnowledgeSmoothing", "knowledge_smoothing", "wiener_shrinkage_gain", "lowband_correction",
-           "lowband", "samples_at_lines", "DEFAULT_DEGREE", "DEFAULT_POOL", "MIN_SAMPLES"]
+           "lowband", "lowband_rows", "samples_at_lines", "DEFAULT_DEGREE", "DEFAULT_POOL", "MIN_SAMPLES"]
 
 #: degree of the polynomial kept whole (the record's offset, slope and curvature)
 DEFAULT_DEGREE = 2
@@ -140,6 +140,14 @@ class KnowledgeSmoothing:
         base, c = self._split(noise)
         return base + idct(c * np.sqrt(self.gain), norm="ortho")
 
+    def error_draws(self, rng: np.random.Generator, count: int) -> np.ndarray:
+        """``count`` draws (draw, sample) of :meth:`error_draw`'s error at once [rad]."""
+        noise = rng.standard_normal((int(count), self.time.size)) * self.noise_rad
+        a = self._basis()
+        coef, *_ = np.linalg.lstsq(a, noise.T, rcond=None)
+        base = (a @ coef).T
+        return base + idct(dct(noise - base, norm="ortho", axis=1) * np.sqrt(self.gain), norm="ortho", axis=1)
+
 
 def knowledge_smoothing(time, values, noise_rad: float, *, degree: int = DEFAULT_DEGREE,
                         pool: int = DEFAULT_POOL) -> KnowledgeSmoothing | None:
@@ -182,6 +190,30 @@ def lowband(samples, sample_time, line_time, *, line_period_s: float, highpass_h
     if not highpass_hz > 0:
         return np.zeros(x.shape)
     return x - highpass_nan(x, dt=line_period_s, cutoff_hz=highpass_hz)
+
+
+def lowband_rows(samples, sample_time, line_time, *, line_period_s: float, highpass_hz: float) -> np.ndarray:
+    """:func:`lowband` of each row of ``samples`` (row, sample) at once, (row, line) [rad]: the rows read at the
+    lines by a cubic spline (clamped to the samples' span) and low-passed by the Gaussian :func:`highpass_nan`
+    subtracts (every line finite, the record's ends as missing data beyond)."""
+    from scipy.interpolate import CubicSpline
+    from scipy.signal import fftconvolve
+
+    from .synthesis import lowpass_sigma_lines
+
+    s = np.atleast_2d(np.asarray(samples, dtype=np.float64))
+    ts = np.asarray(sample_time, dtype=np.float64)
+    t = np.asarray(line_time, dtype=np.float64)
+    if not highpass_hz > 0:
+        return np.zeros((s.shape[0], t.size))
+    x = CubicSpline(ts, s, axis=1)(np.clip(t, ts[0], ts[-1]))
+    # the kernel scipy.ndimage.gaussian_filter1d uses (truncated at 4 σ), by FFT: hundreds of taps on many rows
+    sig = lowpass_sigma_lines(dt=line_period_s, cutoff_hz=highpass_hz)
+    u = np.arange(-int(4.0 * sig + 0.5), int(4.0 * sig + 0.5) + 1, dtype=np.float64)
+    g = np.exp(-0.5 * (u / sig) ** 2)
+    g /= g.sum()
+    den = fftconvolve(np.ones(t.size), g, mode="same")
+    return fftconvolve(x, g[None, :], mode="same", axes=1) / np.maximum(den, 1e-12)
 
 
 def lowband_correction(smoothing: KnowledgeSmoothing, values, line_time, *, line_period_s: float,

@@ -78,7 +78,6 @@ from scipy.ndimage import uniform_filter1d
 
 from .knowledge_check import tapered_power
 from .knowledge_prior import knowledge_noise_floor
-from .knowledge_smoothing import lowband
 from .synthesis import highpass_gain, highpass_nan
 
 __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", "simulated_differentials",
@@ -87,7 +86,8 @@ __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", 
            "knowledge_noise_below", "draw_psd", "pair_bands", "SharedBandNoise", "shared_band_noise",
            "correlated_noise",
            "detrended", "detrended_rms", "detrended_rms_over", "local_error_sigma", "larger_sigma",
-           "mean_error_power", "knowledge_error_draws", "KNOWLEDGE_DRAWS"]
+           "mean_error_power", "knowledge_error_moments", "KnowledgeErrorMoments", "detrended_rows",
+           "KNOWLEDGE_DRAWS"]
 
 
 #: the real fit residual may exceed the simulated one by this factor before the noise is inflated
@@ -608,11 +608,12 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
             _, sim = run(None, samples, True, shared)
         estimate = noise_colour_estimate(real, np.mean(sim, axis=0), edges, n, draws=len(sim))
         errs, _ = run(estimate, samples, False, shared)
-    kerrs = knowledge_error_draws(record, np.isfinite(errs).any(axis=0), krng, knowledge_noise_rad=knowledge_noise_rad,
-                                  knowledge_rate_hz=knowledge_rate_hz, knowledge_smoothing=knowledge_smoothing)
+    kn = knowledge_error_moments(record, np.isfinite(errs).any(axis=0), krng,
+                                 knowledge_noise_rad=knowledge_noise_rad, knowledge_rate_hz=knowledge_rate_hz,
+                                 knowledge_smoothing=knowledge_smoothing)
     return PosteriorSigma(noise_scale=float(scale), samples=int(samples), noise_colour=colour,
                           band_shares=shared.band_shares() if shared is not None else {},
-                          colour_estimate=estimate, **_summary(errs, kerrs, smooth_lines))
+                          colour_estimate=estimate, **_summary(errs, kn, smooth_lines))
 
 
 def _draw_setup(record, samples: int, knowledge_noise_rad: float = 0.0, knowledge_rate_hz: float | None = None
@@ -681,64 +682,113 @@ def _knowledge_rng(seed: int) -> np.random.Generator:
 
 def _draw_error(est: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """A draw's error from the images: estimate − reference, mean removed (the knowledge's noise below the
-    high-pass is drawn apart: :func:`knowledge_error_draws`)."""
+    high-pass is drawn apart: :func:`knowledge_error_moments`)."""
     e = est - ref
     ok = np.isfinite(e)
     return e - np.mean(e[ok]) if ok.any() else e
 
 
-#: draws of the AOCS knowledge's noise below the high-pass per prediction (:func:`knowledge_error_draws`): each
-#: costs a low-pass, not an integration, so they are many more than the images' draws
+#: draws of the AOCS knowledge's noise below the high-pass per prediction (:func:`knowledge_error_moments`): each
+#: costs a spline and a low-pass, not an integration, so they are many more than the images' draws
 KNOWLEDGE_DRAWS = 256
+#: the knowledge's draws are made this many at a time (memory: rows × lines)
+KNOWLEDGE_CHUNK = 32
 
 
-def knowledge_error_draws(record, lines: np.ndarray, rng: np.random.Generator, *, knowledge_noise_rad: float = 0.0,
-                          knowledge_rate_hz: float | None = None, knowledge_smoothing=None,
-                          draws: int = KNOWLEDGE_DRAWS) -> np.ndarray | None:
-    """Draws (draw, line) [rad] of the AOCS knowledge's noise the restored angle keeps below the high-pass: what
-    its smoothing leaves (``knowledge_smoothing``,
-    :meth:`~restore.knowledge_smoothing.KnowledgeSmoothing.error_draw`) or the raw white noise
-    (:func:`knowledge_noise_below`), each draw's mean over ``lines`` (bool, the restored lines) removed and NaN
-    elsewhere. None when the knowledge's noise is not counted (neither given, or no high-pass).
+@dataclass(frozen=True)
+class KnowledgeErrorMoments:
+    """What :func:`knowledge_error_moments` found of the knowledge's noise the restored angle keeps [rad, rad²]."""
 
-    The restored angle's error is the images' part plus this one, independent of it: its variance adds to the
+    #: mean square per line over the draws (NaN off the restored lines)
+    line_ms: np.ndarray
+    #: the same once each draw's least-squares line over the restored lines is removed
+    line_ms_detrended: np.ndarray
+    #: mean over the draws and the restored lines of the detrended draws' square
+    detrended_ms: float
+    #: mean over the draws of :func:`restore.knowledge_check.tapered_power`
+    error_power: np.ndarray
+    draws: int
+
+
+def knowledge_error_moments(record, lines: np.ndarray, rng: np.random.Generator, *, knowledge_noise_rad: float = 0.0,
+                            knowledge_rate_hz: float | None = None, knowledge_smoothing=None,
+                            draws: int = KNOWLEDGE_DRAWS) -> KnowledgeErrorMoments | None:
+    """The moments of the AOCS knowledge's noise the restored angle keeps below the high-pass, from ``draws``
+    draws: what its smoothing leaves (``knowledge_smoothing``,
+    :meth:`~restore.knowledge_smoothing.KnowledgeSmoothing.error_draws`) or the raw white noise of
+    ``knowledge_noise_rad`` per sample at ``knowledge_rate_hz`` (as :func:`knowledge_noise_below`), each draw's
+    mean over ``lines`` (bool, the restored lines) removed. None when it is not counted (neither given, no
+    high-pass, no line).
+
+    The restored angle's error is the images' part plus this one, independent of it: its moments add to the
     images' draws'. Drawn apart, it is not held to the few draws an integration costs — on a short record the
-    smoothing leaves a few degrees of freedom of this noise (the polynomial it keeps whole), whose spread
-    eight draws estimate to ± 25 %.
+    smoothing passes a few degrees of freedom of this noise whole (the polynomial it keeps), whose spread
+    eight draws estimate to ± 25 % — and the draws are made many at a time (a spline and a low-pass on a block
+    of rows).
     """
+    from .knowledge_check import tapered_power_rows
+    from .knowledge_smoothing import lowband_rows
+
     m = np.asarray(lines, dtype=bool)
-    dt = float(record.line_period_s)
-    if not record.highpass_hz > 0 or not m.any():
+    n, dt, hp = m.size, float(record.line_period_s), float(record.highpass_hz)
+    t = np.arange(n) * dt
+    if not hp > 0 or not m.any():
         return None
     if knowledge_smoothing is not None:
-        def one():
-            return lowband(knowledge_smoothing.error_draw(rng), knowledge_smoothing.time, np.arange(m.size) * dt,
-                           line_period_s=dt, highpass_hz=record.highpass_hz)
+        def block(k):
+            return lowband_rows(knowledge_smoothing.error_draws(rng, k), knowledge_smoothing.time, t,
+                                line_period_s=dt, highpass_hz=hp)
     elif knowledge_noise_rad > 0 and knowledge_rate_hz:
-        def one():
-            return knowledge_noise_below(m.size, dt, record.highpass_hz, knowledge_noise_rad, knowledge_rate_hz, rng)
+        ts = (np.arange(int(np.ceil(n * dt * knowledge_rate_hz)) + 4) - 2) / knowledge_rate_hz
+
+        def block(k):
+            return lowband_rows(rng.standard_normal((k, ts.size)) * knowledge_noise_rad, ts, t, line_period_s=dt,
+                                highpass_hz=hp)
     else:
         return None
-    out = np.array([one() for _ in range(int(draws))])
-    out = out - out[:, m].mean(axis=1, keepdims=True)
-    out[:, ~m] = np.nan
-    return out
+    sq, sq_det, power, done = np.zeros(n), np.zeros(n), np.zeros(n // 2 + 1), 0
+    while done < draws:
+        k = min(KNOWLEDGE_CHUNK, int(draws) - done)
+        x = block(k)
+        x = x - x[:, m].mean(axis=1, keepdims=True)
+        d = detrended_rows(x, m)
+        sq += np.sum(np.where(m, x, 0.0) ** 2, axis=0)
+        sq_det += np.sum(np.where(m, d, 0.0) ** 2, axis=0)
+        power += tapered_power_rows(x, m)
+        done += k
+    line_ms = np.where(m, sq / done, np.nan)
+    line_det = np.where(m, sq_det / done, np.nan)
+    return KnowledgeErrorMoments(line_ms=line_ms, line_ms_detrended=line_det,
+                                 detrended_ms=float(np.mean(line_det[m])), error_power=power / done, draws=int(done))
 
 
-def _summary(errs: np.ndarray, kerrs: np.ndarray | None, smooth_lines: int) -> dict:
-    """The prediction's figures from the images' error draws and, independent of them, the knowledge's
-    (:func:`knowledge_error_draws`, or None): variances, mean squares and mean periodograms add."""
-    parts = [np.asarray(errs, dtype=np.float64)] + ([] if kerrs is None else [kerrs])
+def detrended_rows(x: np.ndarray, lines: np.ndarray) -> np.ndarray:
+    """Each row of ``x`` (row, line) less its least-squares line (offset + slope) over ``lines`` (bool, the same for
+    every row, each row finite there; NaN elsewhere), as :func:`detrended` does row by row."""
+    v = np.atleast_2d(np.asarray(x, dtype=np.float64))
+    m = np.asarray(lines, dtype=bool)
+    if np.count_nonzero(m) < 3:
+        return detrended(v)
+    a = np.vander(np.arange(m.size, dtype=np.float64), 2)
+    coef, *_ = np.linalg.lstsq(a[m], v[:, m].T, rcond=None)
+    return np.where(m, v - (a @ coef).T, np.nan)
 
-    def total(f):
-        return sum(f(p) for p in parts)
 
-    det = [detrended(p) for p in parts]
-    return {"sigma": np.sqrt(total(lambda p: _line_variance(p, smooth_lines))),
-            "detrended_sigma": np.sqrt(sum(_line_variance(d, smooth_lines) for d in det)),
-            "detrended_rms": float(np.sqrt(sum(np.nanmean(d ** 2) for d in det)))
-            if all(np.isfinite(d).any() for d in det) else float("nan"),
-            "error_power": total(mean_error_power)}
+def _summary(errs: np.ndarray, kn: KnowledgeErrorMoments | None, smooth_lines: int) -> dict:
+    """The prediction's figures from the images' error draws and, independent of them, the knowledge's moments
+    (:func:`knowledge_error_moments`, or None): variances, mean squares and mean periodograms add."""
+    errs = np.asarray(errs, dtype=np.float64)
+    det = detrended(errs)
+    var, var_det = _line_variance(errs, smooth_lines), _line_variance(det, smooth_lines)
+    ms_det = float(np.nanmean(det ** 2)) if np.isfinite(det).any() else float("nan")
+    power = mean_error_power(errs)
+    if kn is not None:
+        var = var + _smooth_line_variance(kn.line_ms, smooth_lines)
+        var_det = var_det + _smooth_line_variance(kn.line_ms_detrended, smooth_lines)
+        ms_det += kn.detrended_ms
+        power = power + kn.error_power
+    return {"sigma": np.sqrt(var), "detrended_sigma": np.sqrt(var_det), "detrended_rms": float(np.sqrt(ms_det)),
+            "error_power": power}
 
 
 def local_error_sigma(record, local: np.ndarray, *, samples: int = 8, seed: int = 0, smooth_lines: int = 31,
@@ -778,9 +828,10 @@ def local_error_sigma(record, local: np.ndarray, *, samples: int = 8, seed: int 
         est = record.rerun(simulated_differentials(th, taus, lags, valid, dt) + noise, first_stage_gcv=False)
         errs.append(_draw_error(est, ref))
     errs = np.array(errs)
-    kerrs = knowledge_error_draws(record, np.isfinite(errs).any(axis=0), krng, knowledge_noise_rad=knowledge_noise_rad,
-                                  knowledge_rate_hz=knowledge_rate_hz, knowledge_smoothing=knowledge_smoothing)
-    return PosteriorSigma(noise_scale=1.0, samples=int(samples), **_summary(errs, kerrs, smooth_lines))
+    kn = knowledge_error_moments(record, np.isfinite(errs).any(axis=0), krng,
+                                 knowledge_noise_rad=knowledge_noise_rad, knowledge_rate_hz=knowledge_rate_hz,
+                                 knowledge_smoothing=knowledge_smoothing)
+    return PosteriorSigma(noise_scale=1.0, samples=int(samples), **_summary(errs, kn, smooth_lines))
 
 
 def mean_error_power(errs: np.ndarray) -> np.ndarray:
@@ -809,6 +860,12 @@ def _line_variance(errs: np.ndarray, smooth_lines: int) -> np.ndarray:
     ok = np.isfinite(errs).any(axis=0)
     var = np.where(ok, np.nanmean(np.where(np.isfinite(errs), errs ** 2, 0.0), axis=0) * errs.shape[0]
                    / np.maximum(np.isfinite(errs).sum(axis=0), 1), np.nan)
+    return _smooth_line_variance(var, smooth_lines)
+
+
+def _smooth_line_variance(var: np.ndarray, smooth_lines: int) -> np.ndarray:
+    """A variance per line (NaN: none) averaged over ``smooth_lines`` lines, NaN kept."""
+    ok = np.isfinite(var)
     if smooth_lines > 1:
         num = uniform_filter1d(np.where(ok, var, 0.0), smooth_lines, mode="nearest")
         den = uniform_filter1d(ok.astype(np.float64), smooth_lines, mode="nearest")

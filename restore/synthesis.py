@@ -22,7 +22,7 @@ import numpy as np
 from simsat.units import AXES
 
 __all__ = ["SynthesisResult", "instant_synthesis", "highpass_nan", "highpass_gain", "fill_short_gaps",
-           "window_compensation", "spikes"]
+           "window_compensation", "spikes", "lowpass_sigma_lines"]
 
 
 
@@ -217,6 +217,12 @@ def highpass_gain(freq, cutoff_hz: float) -> np.ndarray:
     return 1.0 - 2.0 ** (-0.5 * (np.asarray(freq, dtype=np.float64) / cutoff_hz) ** 2)
 
 
+def lowpass_sigma_lines(*, dt: float, cutoff_hz: float) -> float:
+    """σ [lines] of the Gaussian low-pass :func:`highpass_nan` subtracts: its transfer ``exp(−2π²σ²f²)`` is
+    1/√2 at ``cutoff_hz``, so ``σ = √(ln 2) / (2π f_c)`` [s], over ``dt``."""
+    return float(np.sqrt(np.log(2.0)) / (2 * np.pi * cutoff_hz) / dt)
+
+
 def highpass_nan(signal: np.ndarray, *, dt: float, cutoff_hz: float, mode: str = "constant") -> np.ndarray:
     """Remove frequencies below ``cutoff_hz`` from a gappy signal (NaN kept as NaN).
 
@@ -232,8 +238,7 @@ def highpass_nan(signal: np.ndarray, *, dt: float, cutoff_hz: float, mode: str =
     m = np.isfinite(x)
     if not m.any():
         return x.copy()
-    # Gaussian transfer exp(-2π²σ²f²) = 1/√2 at f_c  ⇒ σ = sqrt(ln 2) / (2π f_c)
-    sigma = np.sqrt(np.log(2.0)) / (2 * np.pi * cutoff_hz) / dt
+    sigma = lowpass_sigma_lines(dt=dt, cutoff_hz=cutoff_hz)
     # outside the record is missing data, like a gap (normalised convolution): padding with
     # the edge sample would put its jitter into the low-pass estimate near the ends
     if mode not in ("constant", "wrap"):

@@ -131,3 +131,14 @@ def test_an_error_both_predictions_miss_is_what_the_sigma_takes():
         assert c.excess_rad2 == pytest.approx(tone, rel=2 / np.sqrt(c.bins / ENBW))
     # and the check ignores what lies outside its band: the same tone at 9 Hz (above 0.7 × 10 Hz)
     assert _check(np.random.default_rng(7), tone_rad=4e-7, tone_hz=9.0).excess_rad2 == 0.0
+
+
+def test_tapered_power_of_rows_is_the_sum_of_each_rows():
+    from restore.knowledge_check import tapered_power, tapered_power_rows
+
+    x = np.random.default_rng(2).standard_normal((4, 900)).cumsum(axis=1)
+    m = np.ones(900, bool)
+    m[300:360] = False
+    one_by_one = sum(tapered_power(r, m) for r in x)
+    np.testing.assert_allclose(tapered_power_rows(x, m), one_by_one, rtol=1e-9, atol=1e-12 * one_by_one.max())
+    assert not tapered_power_rows(x, np.zeros(900, bool)).any()

@@ -130,3 +130,20 @@ def test_dct_noise_stays_white():
     rng = np.random.default_rng(7)
     c = dct(rng.standard_normal((4000, T.size)), norm="ortho", axis=1)
     np.testing.assert_allclose(c.var(axis=0), 1.0, atol=0.1)
+
+
+def test_rows_at_once_are_the_one_row_functions():
+    """lowband_rows is lowband row by row; error_draws has error_draw's variance per sample (Monte Carlo)."""
+    from restore.knowledge_smoothing import lowband_rows
+
+    rng = np.random.default_rng(6)
+    rows = rng.standard_normal((4, T.size)) * SIG
+    one = np.array([lowband(r, T, LINES, line_period_s=DT, highpass_hz=2.0) for r in rows])
+    np.testing.assert_allclose(lowband_rows(rows, T, LINES, line_period_s=DT, highpass_hz=2.0), one,
+                               atol=1e-12 * SIG)
+    assert not lowband_rows(rows, T, LINES, line_period_s=DT, highpass_hz=0.0).any()
+    sm = knowledge_smoothing(T, _trend(T) + rng.standard_normal(T.size) * SIG, SIG)
+    many = sm.error_draws(np.random.default_rng(1), 3000)
+    single = np.array([sm.error_draw(rng) for _ in range(3000)])
+    assert many.shape == (3000, T.size)
+    np.testing.assert_allclose(np.mean(many ** 2, axis=0), np.mean(single ** 2, axis=0), rtol=0.15)

@@ -6,10 +6,10 @@ from restore.axis_integration import PriorSpectrum
 from restore.knowledge_prior import spline_response
 from restore.observability import observability
 from restore.posterior import (
-    KNOWLEDGE_DRAWS,
     detrended,
     detrended_rms,
-    knowledge_error_draws,
+    detrended_rows,
+    knowledge_error_moments,
     draw_psd,
     fit_residual_rms,
     knowledge_noise_below,
@@ -468,7 +468,28 @@ def test_the_knowledge_part_of_sigma_does_not_hang_on_the_few_integration_draws(
         parts.append(np.sqrt(with_k.detrended_rms ** 2 - without.detrended_rms ** 2))
         assert np.all(with_k.sigma >= without.sigma)
     assert np.array(parts) == pytest.approx(ref, rel=0.12)
-    k = knowledge_error_draws(rec, np.ones(N, bool), np.random.default_rng(1), knowledge_smoothing=sm)
-    assert k.shape == (KNOWLEDGE_DRAWS, N) and np.allclose(k.mean(axis=1), 0.0, atol=1e-15)
-    assert knowledge_error_draws(_replace(rec, highpass_hz=0.0), np.ones(N, bool), np.random.default_rng(1),
-                                 knowledge_smoothing=sm) is None
+    assert knowledge_error_moments(_replace(rec, highpass_hz=0.0), np.ones(N, bool), np.random.default_rng(1),
+                                   knowledge_smoothing=sm) is None
+
+
+def test_the_knowledge_moments_are_the_low_band_of_white_noise_and_the_row_helpers_agree():
+    """Raw knowledge noise (white, 0.5 µrad per sample at 50 Hz, 2 Hz high-pass, a 20 s record): the mean square
+    the moments give is ``σ² ∫|L|² df / (f_k / 2)`` (L: the Gaussian low-pass), and its detrended figures are
+    :func:`detrended` row by row."""
+    from types import SimpleNamespace
+
+    sig, rate, hp, n = 0.5e-6, 50.0, 2.0, 50000
+    rec = SimpleNamespace(line_period_s=DT, highpass_hz=hp)
+    m = np.ones(n, bool)
+    mo = knowledge_error_moments(rec, m, np.random.default_rng(3), knowledge_noise_rad=sig, knowledge_rate_hz=rate,
+                                 draws=64)
+    sigma_g = np.sqrt(np.log(2)) / (2 * np.pi * hp)
+    band = 1 / (4 * np.sqrt(np.pi) * sigma_g)            # ∫_0^∞ exp(-4π²σ²f²) df
+    assert np.sqrt(np.mean(mo.line_ms[5000:45000])) == pytest.approx(sig * np.sqrt(band / (rate / 2)), rel=0.08)
+    assert mo.detrended_ms < np.nanmean(mo.line_ms) and mo.draws == 64
+    assert knowledge_error_moments(rec, m, np.random.default_rng(3)) is None      # no noise given: not counted
+    x = np.random.default_rng(4).standard_normal((3, N)).cumsum(axis=1)
+    mm = np.ones(N, bool)
+    mm[:40] = False
+    np.testing.assert_allclose(detrended_rows(x, mm), detrended(np.where(mm, x, np.nan)), atol=1e-12,
+                               equal_nan=True)
