@@ -86,7 +86,7 @@ __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", 
            "knowledge_noise_below", "draw_psd", "pair_bands", "SharedBandNoise", "shared_band_noise",
            "correlated_noise",
            "detrended", "detrended_rms", "detrended_rms_over", "local_error_sigma", "larger_sigma",
-           "mean_error_power", "knowledge_error_moments", "KnowledgeErrorMoments", "detrended_rows",
+           "mean_error_power", "knowledge_error_moments", "KnowledgeErrorMoments", "detrended_rows", "knowledge_sample_times",
            "KNOWLEDGE_DRAWS"]
 
 
@@ -524,6 +524,12 @@ def correlated_noise(sigma: np.ndarray, colour: np.ndarray | None, shared: Share
     return np.nan_to_num(sigma) * irfft(spec, n=n, axis=-1)
 
 
+def knowledge_sample_times(n: int, dt: float, rate_hz: float) -> np.ndarray:
+    """Telemetry sample times [s] at ``rate_hz`` covering ``n`` lines of ``dt`` from the first line, two samples
+    beyond each end (the spline's support)."""
+    return (np.arange(int(np.ceil(n * dt * rate_hz)) + 4) - 2) / rate_hz
+
+
 def knowledge_noise_below(n: int, dt: float, highpass_hz: float, noise_rad: float, rate_hz: float,
                           rng: np.random.Generator) -> np.ndarray:
     """One draw of the AOCS knowledge noise the images leave uncorrected: below the high-pass [rad].
@@ -532,10 +538,8 @@ def knowledge_noise_below(n: int, dt: float, highpass_hz: float, noise_rad: floa
     interpolated (cubic) at the ``n`` line times, minus its high-passed part
     (above the high-pass the images see, and correct, the knowledge's error).
     """
-    span = n * dt
-    k = int(np.ceil(span * rate_hz)) + 4
-    ts = (np.arange(k) - 2) / rate_hz
-    x = CubicSpline(ts, rng.standard_normal(k) * noise_rad)(np.arange(n) * dt)
+    ts = knowledge_sample_times(n, dt, rate_hz)
+    x = CubicSpline(ts, rng.standard_normal(ts.size) * noise_rad)(np.arange(n) * dt)
     return x - highpass_nan(x, dt=dt, cutoff_hz=highpass_hz) if highpass_hz > 0 else np.zeros(n)
 
 
@@ -739,7 +743,7 @@ def knowledge_error_moments(record, lines: np.ndarray, rng: np.random.Generator,
             return lowband_rows(knowledge_smoothing.error_draws(rng, k), knowledge_smoothing.time, t,
                                 line_period_s=dt, highpass_hz=hp)
     elif knowledge_noise_rad > 0 and knowledge_rate_hz:
-        ts = (np.arange(int(np.ceil(n * dt * knowledge_rate_hz)) + 4) - 2) / knowledge_rate_hz
+        ts = knowledge_sample_times(n, dt, knowledge_rate_hz)
 
         def block(k):
             return lowband_rows(rng.standard_normal((k, ts.size)) * knowledge_noise_rad, ts, t, line_period_s=dt,
