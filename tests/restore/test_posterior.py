@@ -445,12 +445,13 @@ def test_extended_lines_hold_the_longest_delay_and_lag_beyond_the_record():
 
 def test_the_knowledge_part_of_sigma_does_not_hang_on_the_few_integration_draws():
     """On a short record the smoothing passes a few degrees of freedom of the knowledge's noise whole (the
-    polynomial it keeps; every other gain 0 here): eight draws would estimate their spread to ± 25 %. Drawn
-    apart (:func:`knowledge_error_draws`), the knowledge's part of the predicted RMS is within 12 % of a
-    4000-draw Monte Carlo of the same error for every seed, and adds to the images' part in quadrature."""
+    polynomial it keeps; every other gain 0 here): the integration's eight draws would estimate their spread to
+    ± 25 %. Drawn apart (:func:`knowledge_error_moments`), the knowledge's part of the predicted RMS is within
+    12 % of a 4000-draw Monte Carlo of the same error for every seed, however few the integration's draws (two
+    here), and adds to the images' part in quadrature."""
     from dataclasses import replace as _replace
 
-    from restore.knowledge_smoothing import KnowledgeSmoothing, lowband
+    from restore.knowledge_smoothing import KnowledgeSmoothing, lowband_rows
 
     rec, _ = _record(seed=5)
     rec = _replace(rec, highpass_hz=2.0)
@@ -459,12 +460,14 @@ def test_the_knowledge_part_of_sigma_does_not_hang_on_the_few_integration_draws(
     sm = KnowledgeSmoothing(t, 0.3e-6, 2, np.zeros(t.size))
     rng = np.random.default_rng(99)
     lines = np.arange(N) * DT
-    ref = np.array([lowband(sm.error_draw(rng), t, lines, line_period_s=DT, highpass_hz=2.0) for _ in range(4000)])
+    # batched (lowband_rows is lowband row by row: test_knowledge_smoothing) and independent of the prediction's
+    ref = np.concatenate([lowband_rows(sm.error_draws(rng, 500), t, lines, line_period_s=DT, highpass_hz=2.0)
+                          for _ in range(8)])
     ref = np.sqrt(np.mean(detrended(ref - ref.mean(axis=1, keepdims=True)) ** 2))
     parts = []
     for seed in range(4):
-        without = posterior_sigma(rec, samples=8, seed=seed, check_noise=False)
-        with_k = posterior_sigma(rec, samples=8, seed=seed, check_noise=False, knowledge_smoothing=sm)
+        without = posterior_sigma(rec, samples=2, seed=seed, check_noise=False)
+        with_k = posterior_sigma(rec, samples=2, seed=seed, check_noise=False, knowledge_smoothing=sm)
         parts.append(np.sqrt(with_k.detrended_rms ** 2 - without.detrended_rms ** 2))
         assert np.all(with_k.sigma >= without.sigma)
     assert np.array(parts) == pytest.approx(ref, rel=0.12)
