@@ -87,6 +87,7 @@ __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", 
            "correlated_noise",
            "detrended", "detrended_rms", "detrended_rms_over", "local_error_sigma", "larger_sigma",
            "mean_error_power", "knowledge_error_moments", "KnowledgeErrorMoments", "detrended_rows", "knowledge_sample_times",
+           "knowledge_noise_below_rows",
            "KNOWLEDGE_DRAWS"]
 
 
@@ -538,9 +539,17 @@ def knowledge_noise_below(n: int, dt: float, highpass_hz: float, noise_rad: floa
     interpolated (cubic) at the ``n`` line times, minus its high-passed part
     (above the high-pass the images see, and correct, the knowledge's error).
     """
+    return knowledge_noise_below_rows(1, n, dt, highpass_hz, noise_rad, rate_hz, rng)[0]
+
+
+def knowledge_noise_below_rows(rows: int, n: int, dt: float, highpass_hz: float, noise_rad: float, rate_hz: float,
+                               rng: np.random.Generator) -> np.ndarray:
+    """``rows`` draws (row, line) of :func:`knowledge_noise_below` at once."""
+    from .knowledge_smoothing import lowband_rows
+
     ts = knowledge_sample_times(n, dt, rate_hz)
-    x = CubicSpline(ts, rng.standard_normal(ts.size) * noise_rad)(np.arange(n) * dt)
-    return x - highpass_nan(x, dt=dt, cutoff_hz=highpass_hz) if highpass_hz > 0 else np.zeros(n)
+    x = rng.standard_normal((int(rows), ts.size)) * noise_rad
+    return lowband_rows(x, ts, np.arange(n) * dt, line_period_s=dt, highpass_hz=highpass_hz)
 
 
 def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: int = 31,
@@ -743,11 +752,8 @@ def knowledge_error_moments(record, lines: np.ndarray, rng: np.random.Generator,
             return lowband_rows(knowledge_smoothing.error_draws(rng, k), knowledge_smoothing.time, t,
                                 line_period_s=dt, highpass_hz=hp)
     elif knowledge_noise_rad > 0 and knowledge_rate_hz:
-        ts = knowledge_sample_times(n, dt, knowledge_rate_hz)
-
         def block(k):
-            return lowband_rows(rng.standard_normal((k, ts.size)) * knowledge_noise_rad, ts, t, line_period_s=dt,
-                                highpass_hz=hp)
+            return knowledge_noise_below_rows(k, n, dt, hp, knowledge_noise_rad, knowledge_rate_hz, rng)
     else:
         return None
     sq, sq_det, power, done = np.zeros(n), np.zeros(n), np.zeros(n // 2 + 1), 0
