@@ -200,8 +200,8 @@ MEANING = {
     "a line shares)",
     "restoration.sigma_knowledge_check": "add to σ, in quadrature, the images' share (P_I / (P_I + P_K)) of what "
     "each axis's restored angle and its smoothed AOCS knowledge disagree by beyond both predicted errors (between "
-    "1.25 × the high-pass and 0.7 × the knowledge's cut-off, more than two sampling spreads; the check itself is "
-    "always recorded, restoration.nc sigma_<axis> knowledge_check, when the product records the knowledge's "
+    "1.25 × the high-pass and 0.7 × the knowledge's cut-off, as measured: the report calls it a disagreement beyond two "
+    "sampling spreads, σ takes its share of any excess; the check itself is always recorded, restoration.nc sigma_<axis> knowledge_check, when the product records the knowledge's "
     "noise and filter); the data cannot tell which prediction is short, so each takes its share",
     "restoration.max_sigma_px": "lines whose predicted σ exceeds this [px] are flagged and not restored; \"auto\": "
                                 "3 × the axis's median σ",

@@ -58,6 +58,19 @@ def test_the_excess_counts_only_beyond_the_sampling_spread():
     back = KnowledgeCheck.from_dict(chk.as_dict())
     assert back.band_hz == chk.band_hz and back.bins == 150
     assert back.excess_rad2 == pytest.approx(0.5) and back.observed_rad2 == pytest.approx(1.5)
+    assert back.booked_rad2 == pytest.approx(0.3)
+
+
+def test_sigma_books_the_measured_excess_whether_significant_or_not():
+    """Below the threshold the two predictions do not significantly disagree (no excess reported), but σ still
+    takes the images' share of what was measured beyond them; nothing when the observed power is below them."""
+    below = KnowledgeCheck((4.0, 7.0), 1.19, 0.6, 0.4, 150, excess_variance(1.19, 0.6, 0.4, 150))
+    assert below.excess_rad2 == 0.0
+    assert below.measured_excess_rad2 == pytest.approx(0.19)
+    assert below.booked_rad2 == pytest.approx(0.6 * 0.19)
+    assert KnowledgeCheck.from_dict(below.as_dict()).booked_rad2 == pytest.approx(0.6 * 0.19)
+    under = KnowledgeCheck((4.0, 7.0), 0.5, 0.6, 0.4, 150, 0.0)
+    assert under.measured_excess_rad2 == 0.0 and under.booked_rad2 == 0.0
 
 
 def test_the_filter_error_of_a_tone_is_one_minus_the_gain_times_the_tone():
@@ -117,6 +130,15 @@ def test_restored_and_knowledge_agreeing_within_their_predictions_raise_nothing(
     ratios = np.array([c.ratio for c in checks])
     assert 0.7 < np.median(ratios) < 1.2
     assert sum(c.excess_rad2 == 0 for c in checks) >= 19
+    # what σ books then is the positive part of the band power's sampling scatter: with the band's power a
+    # χ² of 2 m / ENBW degrees of freedom about the prediction, E[(X − 1)⁺] of it (the prediction, an upper
+    # bound, makes it less); twice that bounds the mean of 20 checks
+    k = 2 * checks[0].bins / ENBW
+    from scipy.stats import chi2
+    x = np.linspace(1, 12, 20001)
+    mean_positive = np.trapezoid((x - 1) * chi2.pdf(x * k, k) * k, x)
+    booked = np.mean([c.booked_rad2 / (c.images_share * (c.images_rad2 + c.knowledge_rad2)) for c in checks])
+    assert 0 < booked < 2 * mean_positive
     c = checks[0]
     assert c.band_hz[0] >= 2.5 and c.band_hz[1] <= 7.0 and c.bins >= MIN_BINS
 
@@ -129,6 +151,15 @@ def test_an_error_both_predictions_miss_is_what_the_sigma_takes():
         c = _check(np.random.default_rng(100 + s), tone_rad=4e-7)
         tone = (highpass_gain(5.0, HP) * 4e-7) ** 2 / 2
         assert c.excess_rad2 == pytest.approx(tone, rel=2 / np.sqrt(c.bins / ENBW))
+    # a tone half as large stays under the threshold (no excess reported) and is still what the measured
+    # excess, which σ books its share of, holds: within two spreads of the band's predicted power
+    for s in range(3):
+        c = _check(np.random.default_rng(100 + s), tone_rad=2e-7)
+        tone = (highpass_gain(5.0, HP) * 2e-7) ** 2 / 2
+        assert c.excess_rad2 == 0.0 and c.ratio > 1.0
+        spread = 2 / np.sqrt(c.bins / ENBW) * (c.images_rad2 + c.knowledge_rad2)
+        assert abs(c.measured_excess_rad2 - tone) < spread
+        assert c.booked_rad2 == pytest.approx(c.images_share * c.measured_excess_rad2)
     # and the check ignores what lies outside its band: the same tone at 9 Hz (above 0.7 × 10 Hz)
     assert _check(np.random.default_rng(7), tone_rad=4e-7, tone_hz=9.0).excess_rad2 == 0.0
 
