@@ -763,3 +763,17 @@ def test_the_budget_figure_draws_the_predicted_parts_beside_the_measured_ones():
     widths = sorted(round(p.get_width(), 6) for p in ax.patches)
     assert widths == [0.002, 0.01, 0.03, 0.1, 0.7, 1.8]
     assert [t.get_text() for t in ax.get_legend().get_texts()] == [r["component"] for r in rows]
+
+
+def test_knowledge_check_cell_says_what_sigma_takes_below_the_limit_too():
+    """Beyond the limit the cell states the excess and σ's share of it; below it no excess is claimed, but what σ
+    takes of the measured one is still said; nothing when the observed power is within the predictions."""
+    from reports.run_report import _knowledge_check_text
+
+    base = {"band_hz": [2.5, 6.9], "threshold": 1.87}
+    below = _knowledge_check_text({**base, "ratio": 1.79, "excess_rms_rad": 0.0, "booked_rms_rad": 1.05e-8}, 1e-6)
+    assert "excess 0" not in below and below.endswith("σ takes 0.0105 px of the excess")
+    beyond = _knowledge_check_text({**base, "ratio": 2.5, "excess_rms_rad": 2e-8, "booked_rms_rad": 1e-8}, 1e-6)
+    assert "excess 0.0200 px, σ takes 0.0100 px of it" in beyond
+    assert _knowledge_check_text({**base, "ratio": 0.5, "excess_rms_rad": 0.0, "booked_rms_rad": 0.0},
+                                 1e-6) == "2.5–6.9 Hz: 0.50 × (limit 1.87)"
