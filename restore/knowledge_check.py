@@ -43,8 +43,9 @@ images' share of the excess as measured, ``P_I / (P_I + P_K)`` of it
 proportion to its size. The excess σ takes is the measured one, significant
 or not (the threshold says when the two *disagree*, which the report states;
 a shortfall under it was never counted, and σ was low on average: the
-stress suite's actual / predicted σ centred on 1.18 on pitch, 1.00 on roll). All of it would be right when the images' side is
-short (the restored error then rises by exactly ``D``'s excess) and wrong
+stress suite's actual / predicted σ centred on 1.18 on pitch, 1.00 on
+roll). All of it would be right when the images' side is short (the
+restored error then rises by exactly ``D``'s excess) and wrong
 when the knowledge's is: on geo_noisy_knowledge, whose knowledge noise
 dominates the band (images' share 1–2 %) and errs more than predicted there,
 booking the whole excess took actual / predicted σ from 1.34 / 1.50 to
