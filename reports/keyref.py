@@ -129,6 +129,9 @@ MEANING = {
     "restoration.selection": "candidate points: grid, double_gradient or spread",
     "restoration.points_per_line": "candidates per line and pair",
     "restoration.texture_max_std_px": "a-priori criterion: skip windows whose expected matching σ exceeds this [px]",
+    "restoration.noise_model": "the images' noise in that criterion: signal_dependent (read + photon noise: the "
+                               "detector's calibration from product.nc, else fitted on the band) or constant (one σ "
+                               "per band)",
     "restoration.window_lines": "matching window height [lines] (PHR: 3)",
     "restoration.window_columns": "matching window width [columns], odd; \"auto\": the narrowest of 31, 47, 63 whose median a-priori matching σ is ≤ 0.1 px on the reference band (31 on the built-in scenes)",
     "restoration.search_lines": "integer search half-range around the prediction, lines [px]",

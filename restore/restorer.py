@@ -183,7 +183,9 @@ class Restorer:
         s = replace(g, highpass_hz=stages.highpass_from_product(g.highpass_hz, product))
         if g.window_columns == "auto":
             img = product.image(product.reference_detector, lines=slice(0, 1000))
-            s = replace(s, window=(g.window[0], stages.window_columns_for(img, window_lines=g.window[0])))
+            s = replace(s, window=(g.window[0], stages.window_columns_for(img, window_lines=g.window[0],
+                                                                          noise_model=g.noise_model,
+                                                                          radiometry=product.radiometry)))
         return s
 
     def _n_iterations(self, n_pairs: int) -> int:

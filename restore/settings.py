@@ -12,7 +12,12 @@ from .method_choice import AUTO_CANDIDATES, AUTO_METHOD
 from .selection import SELECTION_METHODS
 from .synthesis import AXES
 
-__all__ = ["RestorationSettings", "restoration_settings", "settings_dict"]
+__all__ = ["RestorationSettings", "restoration_settings", "settings_dict", "NOISE_MODELS"]
+
+#: ``restoration.noise_model``: the images' noise in the texture criterion (point selection, window width):
+#: "signal_dependent" (read + shot noise, fitted per band: :func:`restore.selection.noise_level_function`) or
+#: "constant" (one σ per band, :func:`restore.selection.estimate_image_noise`)
+NOISE_MODELS = ("signal_dependent", "constant")
 
 
 @dataclass
@@ -21,6 +26,7 @@ class RestorationSettings:
     selection: str = "grid"
     points_per_line: int = 24
     texture_max_std_px: float = 0.4
+    noise_model: str = "signal_dependent"
     window: tuple = (3, 31)
     window_columns: int | str = "auto"
     search: tuple = (3, 3)
@@ -113,6 +119,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.selection = sec.string("selection", s.selection, choices=tuple(SELECTION_METHODS))
     s.points_per_line = sec.integer("points_per_line", s.points_per_line, ge=3, le=1000)
     s.texture_max_std_px = sec.number("texture_max_std_px", s.texture_max_std_px, gt=0)
+    s.noise_model = sec.string("noise_model", s.noise_model, choices=NOISE_MODELS)
     wl = sec.integer("window_lines", s.window[0], ge=1, le=63)
     wc = sec.number_or("window_columns", "auto", ge=3, le=255)
     if wl % 2 == 0:

@@ -35,7 +35,8 @@ from .posterior import (extended_lines, fit_residuals, larger_sigma, local_error
                         simulated_differentials)
 from .rematch import rematch_pair
 from .result import IntegrationRecord, PairData
-from .selection import estimate_image_noise, expected_matching_std, select_points_in_blocks
+from .selection import (NoiseLevel, estimate_image_noise, expected_matching_std, noise_level_function,
+                        select_points_in_blocks)
 from .settings import RestorationSettings
 from .synthesis import (
     AXES,
@@ -49,7 +50,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -194,12 +195,13 @@ def shared_columns(sm, ahead: str, behind: str, shape_a: tuple, shape_b: tuple, 
 
 
 def select_candidates(img_a: np.ndarray, shape_b: tuple, ahead: str, behind: str, settings: RestorationSettings,
-                      sm) -> Candidates:
+                      sm, noise=None) -> Candidates:
     """Select points in band ``ahead`` (a-priori criterion) and predict them in ``behind`` with the knowledge.
 
     Only lines whose homologues fall inside band B (with the matcher's support
     margin) are used, and only the columns B shares (:func:`shared_columns`);
-    points predicted outside B are dropped.
+    points predicted outside B are dropped. ``noise``: band A's noise
+    (:func:`band_noise`); None: estimated on the image.
     """
     n_lines = img_a.shape[0]
     tau = sm.nominal_delay_s(ahead, behind)
@@ -225,7 +227,9 @@ def select_candidates(img_a: np.ndarray, shape_b: tuple, ahead: str, behind: str
     lines_a, cols_a = select_points_in_blocks(crop, method=settings.selection,
                                               per_line=settings.points_per_line, window=settings.window,
                                               search=settings.search, margin=(ml, mc), line_mask=usable,
-                                              max_std=settings.texture_max_std_px)
+                                              max_std=settings.texture_max_std_px,
+                                              noise_std=band_noise(crop, settings.noise_model) if noise is None
+                                              else noise)
     cols_a = cols_a + a0
     if lines_a.size == 0:
         return Candidates(ahead, behind, tau, lines_a, cols_a, lines_a.copy(), cols_a.copy())
@@ -265,7 +269,8 @@ def match_pair(product: Product, ahead: str, behind: str, settings: RestorationS
     sm = sm or product.sensor_model()
     img_a = product.image(ahead)
     img_b = product.image(behind)
-    cand = select_candidates(img_a, img_b.shape, ahead, behind, settings, sm)
+    cand = select_candidates(img_a, img_b.shape, ahead, behind, settings, sm,
+                             noise=band_noise(img_a, settings.noise_model, product.radiometry))
     return match_candidates(img_a, img_b, cand, settings)
 
 
@@ -524,7 +529,22 @@ WINDOW_COLUMN_CANDIDATES = (31, 47, 63)
 WINDOW_TARGET_STD_PX = 0.1
 
 
-def window_columns_for(image: np.ndarray, *, window_lines: int, max_lines: int = 1000) -> int:
+def band_noise(image: np.ndarray, model: str = "signal_dependent", radiometry=None):
+    """The band's noise for the texture criterion: its :class:`~restore.selection.NoiseLevel` (σ² = a + b ×
+    level: shot noise grows with the signal), or one σ for the band (``model = "constant"``).
+
+    The level function is the detector's calibration when the product records it (``radiometry``,
+    :attr:`simsat.product.Product.radiometry`), else fitted on the image
+    (:func:`~restore.selection.noise_level_function`; the texture inflates it on bright ground)."""
+    if model == "constant":
+        return estimate_image_noise(image)
+    if radiometry is not None:
+        return NoiseLevel.from_radiometry(radiometry)
+    return noise_level_function(image)
+
+
+def window_columns_for(image: np.ndarray, *, window_lines: int, max_lines: int = 1000,
+                       noise_model: str = "signal_dependent", radiometry=None) -> int:
     """The narrowest window width whose median a-priori matching σ (Delon–Rougé) reaches the target.
 
     A wider window averages more texture against the noise (σ ∝ 1/√width) but
@@ -534,7 +554,7 @@ def window_columns_for(image: np.ndarray, *, window_lines: int, max_lines: int =
     Estimated on the first ``max_lines`` lines of the band.
     """
     img = np.asarray(image[:max_lines], dtype=np.float64)
-    noise = estimate_image_noise(img)
+    noise = band_noise(img, noise_model, radiometry)
     for w in WINDOW_COLUMN_CANDIDATES:
         sl, sc = expected_matching_std(img, window=(window_lines, w), noise_std=noise)
         s = np.maximum(sl, sc)

@@ -248,6 +248,12 @@ class Product:
         return SensorModel(platform=self.platform, instrument=self.instrument, dem=self.dem,
                            attitude=attitude or clamped_attitude(self.knowledge), t0_s=float(self.ds.attrs["t0_s"]))
 
+    @property
+    def radiometry(self):
+        """The detector's :class:`~simsat.instrument.Radiometry` (gain, read noise) when product.nc records it
+        (``full_well_e``), else None (a product of an earlier version, an orthoimage)."""
+        return self.instrument.radiometry if "full_well_e" in self.ds.attrs else None
+
     def delay_s(self, ahead: str, behind: str) -> float:
         """Delay τ [s] of the pair ``ahead/behind``: as stored in product.nc (``delay_s``), else computed from
         the product's geometry (:func:`simsat.sensor_model.flat_ground_delay_s`, the one place τ is computed)."""
@@ -256,6 +262,14 @@ class Product:
             if f"{ahead}/{behind}" in pairs:
                 return float(np.atleast_1d(self.ds["delay_s"].values)[pairs.index(f"{ahead}/{behind}")])
         return self.sensor_model().nominal_delay_s(ahead, behind)
+
+
+def _radiometry_from_attrs(a) -> Radiometry:
+    """The detector radiometry product.nc records (older products: the bits only, the rest default)."""
+    if "full_well_e" not in a:
+        return Radiometry(bits=int(a.get("bits", 12)))
+    return Radiometry(bits=int(a.get("bits", 12)), full_well_e=float(a["full_well_e"]),
+                      read_noise_e=float(a["read_noise_e"]), enabled=bool(int(a.get("radiometric_noise", 1))))
 
 
 def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowledge_spec=None,
@@ -328,6 +342,9 @@ def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowled
         "reference_detector": sc.acquisition.reference_detector,
         "pixel_ifov_rad": inst.ifov_rad(sc.acquisition.reference_detector),
         "mtf_nyquist": inst.mtf_nyquist, "bits": inst.radiometry.bits,
+        # the detector's radiometric calibration, as a ground segment knows it (restore's noise model)
+        "full_well_e": float(inst.radiometry.full_well_e), "read_noise_e": float(inst.radiometry.read_noise_e),
+        "radiometric_noise": int(bool(inst.radiometry.enabled)),
         "dem_dx_m": float(known_dem.dx_m), "dem_dy_m": float(known_dem.dy_m),
         **({} if knowledge_spec is None else {"knowledge_cutoff_hz": float(knowledge_spec.cutoff_hz),
                                               "knowledge_rate_hz": float(knowledge_spec.rate_hz),
@@ -454,7 +471,7 @@ def read_product(run_dir: str | Path) -> Product:
                                  rows=int(ds["detector_rows"].values[i]) if "detector_rows" in ds else 1))
         inst = Instrument(focal_length_m=float(a["focal_length_m"]), line_period_s=float(a["line_period_s"]),
                           detectors=tuple(dets), mtf_nyquist=float(a.get("mtf_nyquist", 1.0)),
-                          radiometry=Radiometry(bits=int(a.get("bits", 12))))
+                          radiometry=_radiometry_from_attrs(a))
         plat = Platform(trajectory=trajectory_from_attrs(a), scan=scan_from_attrs(a),
                         off_nadir_roll_rad=float(a.get("off_nadir_roll_rad", 0.0)),
                         off_nadir_pitch_rad=float(a.get("off_nadir_pitch_rad", 0.0)))

@@ -4,9 +4,9 @@ import pytest
 
 from reports.synthetic import textured_image
 from restore.matching import support_margin
-from restore.selection import (double_gradient_points, estimate_image_noise, expected_matching_std,
-                               gradient_energy, grid_points, select_points, spread_quality_subset,
-                               texture_mask)
+from restore.selection import (NoiseLevel, double_gradient_points, estimate_image_noise, expected_matching_std,
+                               gradient_energy, grid_points, noise_level_function, select_points,
+                               spread_quality_subset, texture_mask)
 
 NOISE = 0.5
 L, C = 160, 640
@@ -229,3 +229,76 @@ def test_selection_in_blocks_equals_the_whole_image(method):
     assert a[0].size > 1000
     np.testing.assert_array_equal(a[0], b[0])
     np.testing.assert_array_equal(a[1], b[1])
+
+
+# --------------------------------------------------------------------------- signal-dependent noise
+def _poisson_gaussian_image(read_var, gain, *, shape=(600, 600), seed=3):
+    """A smooth ramp of levels 5-800 (no texture Immerkaer sees) with noise of variance read_var + gain × level."""
+    rng = np.random.default_rng(seed)
+    level = np.linspace(5.0, 800.0, shape[1])[None, :] * np.ones((shape[0], 1))
+    return level + np.sqrt(read_var + gain * level) * rng.standard_normal(shape), level
+
+
+def test_noise_level_function_recovers_read_and_shot_noise():
+    img, _ = _poisson_gaussian_image(7.5, 0.068)
+    nl = noise_level_function(img)
+    assert nl.read_var == pytest.approx(7.5, rel=0.1)
+    assert nl.shot_gain == pytest.approx(0.068, rel=0.05)
+    # a constant noise is found constant
+    img = 50.0 + 3.0 * np.random.default_rng(4).standard_normal((400, 400)) + np.linspace(0, 50, 400)[None, :]
+    nl = noise_level_function(img)
+    assert nl.std(10.0) == pytest.approx(3.0, rel=0.05) and nl.std(100.0) == pytest.approx(3.0, rel=0.05)
+
+
+def test_noise_level_of_the_detector_calibration_matches_the_rendered_noise():
+    """σ²(DN) = (read · g)² + g · DN + 1/12 (g = DN per electron): the noise simsat's radiometry draws."""
+    from simsat.instrument import Radiometry
+    from simsat.simulate import apply_radiometry
+
+    r = Radiometry(full_well_e=60000.0, signal_fraction=0.6, read_noise_e=40.0, bits=12)
+    nl = NoiseLevel.from_radiometry(r)
+    g = r.gain_dn_per_e
+    assert nl.read_var == pytest.approx((40.0 * g) ** 2 + 1 / 12)
+    assert nl.shot_gain == pytest.approx(g)
+    for radiance in (0.005, 0.02, 0.3):   # (lower, the clip at 0 DN trims the noise)
+        dn = apply_radiometry(np.full((200, 400), radiance), r, seed=1, band_index=0).astype(float)
+        assert dn.std() == pytest.approx(float(nl.std(dn.mean())), rel=0.03)
+    assert NoiseLevel.from_radiometry(Radiometry(enabled=False)).std(1000.0) == pytest.approx(np.sqrt(1 / 12))
+
+
+def test_texture_criterion_takes_each_window_at_its_own_noise():
+    """A dim textured patch (a cloud's shadow) beside bright ground: one σ for the band, read at the band's
+    median level, overstates the shadow's noise and rejects its windows; the level function keeps them,
+    and on bright ground it rejects what its real noise makes unmatchable."""
+    rng = np.random.default_rng(6)
+    nl = NoiseLevel(read_var=7.5, shot_gain=0.068)
+    tex = textured_image((200, 600), rng=rng)
+    level = np.where(np.arange(600)[None, :] < 300, 15.0, 400.0) * np.ones((200, 1))
+    clean = level * (1.0 + 0.2 * tex)
+    img = clean + nl.std(clean) * rng.standard_normal(clean.shape)
+    constant = estimate_image_noise(img)
+    assert nl.std(15.0) < constant < nl.std(400.0)
+    dark, bright = (slice(20, 180), slice(40, 260)), (slice(20, 180), slice(340, 560))
+    # expected σ with the level function is the constant-noise formula at the window's own σ (exactly where
+    # the level is flat)
+    flat = np.full((100, 200), 15.0) + 0.9 * np.sin(np.arange(200) * 2 * np.pi / 31)[None, :]
+    _, sc = expected_matching_std(flat, window=(3, 31), noise_std=nl)
+    _, sc0 = expected_matching_std(flat, window=(3, 31), noise_std=float(nl.std(15.0)))
+    assert np.allclose(sc[5:-5, 40:-40], sc0[5:-5, 40:-40], rtol=1e-6)
+    ok_level = texture_mask(img, window=(3, 31), noise_std=nl, max_std=0.4)
+    ok_const = texture_mask(img, window=(3, 31), noise_std=constant, max_std=0.4)
+    assert ok_level[dark].mean() > 0.5 and ok_const[dark].mean() < 0.05
+    assert ok_level[bright].mean() <= ok_const[bright].mean()
+    # and what it selects is what the matches achieve: the a-priori σ of kept dark windows is right (Monte Carlo
+    # on the patch: the Delon-Rougé σ against the scatter of matches is checked in test_matching)
+    pts = select_points(img, per_line=12, window=(3, 31), noise_std=nl, max_std=0.4)
+    assert np.sum(pts[1] < 300) > 0.2 * pts[1].size
+
+
+def test_noise_level_function_needs_an_image():
+    with pytest.raises(ValueError, match="3 x 3"):
+        noise_level_function(np.zeros((2, 10)))
+    with pytest.raises(ValueError, match="bins"):
+        noise_level_function(np.zeros((50, 50)), bins=1)
+    flat = np.full((40, 40), 7.0)           # no spread of levels, too few pixels: the constant estimate
+    assert noise_level_function(flat).shot_gain == 0.0

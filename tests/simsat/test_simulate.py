@@ -47,6 +47,23 @@ def test_product_records_what_the_aocs_knowledge_covers(tiny_run):
     assert attrs["knowledge_noise_urad"] == spec.noise_urad
 
 
+def test_product_records_the_detector_radiometry(tiny_run):
+    """A ground segment knows its detector's calibration (gain, read noise): restore's noise model reads it;
+    an older product without it reads as unknown (None)."""
+    from simsat.product import read_product
+    from simsat.scenario import load_scenario
+
+    r = load_scenario("tiny").instrument.radiometry
+    p = read_product(tiny_run)
+    assert p.radiometry is not None
+    assert (p.radiometry.full_well_e, p.radiometry.read_noise_e, p.radiometry.bits, p.radiometry.enabled) == \
+        (r.full_well_e, r.read_noise_e, r.bits, r.enabled)
+    assert p.radiometry.gain_dn_per_e == pytest.approx(r.gain_dn_per_e)
+    for key in ("full_well_e", "read_noise_e", "radiometric_noise"):
+        del p.ds.attrs[key]
+    assert p.radiometry is None
+
+
 def test_same_scenario_and_seed_give_the_same_bytes(tiny_run, tmp_path):
     d2 = tmp_path / "again"
     simulate("tiny", d2, progress=False)
