@@ -75,12 +75,12 @@ def _take_records(records: dict, estimate: dict, new: dict) -> None:
         estimate[a] = np.where(np.isfinite(rec.increment), rec.previous + rec.increment, np.nan)
 
 
-
 def _same_drops(a: list, b: list) -> bool:
     """Whether two per-pair ``{axis: line mask}`` drop lists drop the same lines."""
     def lines(dr):
         return {k: tuple(np.flatnonzero(m)) for k, m in dr.items() if np.any(m)}
     return len(a) == len(b) and all(lines(x) == lines(y) for x, y in zip(a, b))
+
 
 class Restorer:
     """Restore the line-of-sight attitude of a product from its bands.

@@ -139,10 +139,11 @@ def _noise_block_starts(shape, max_pixels: int, block_lines: int = 512):
     return all_starts[pick]
 
 
-def _immerkaer_blocks(image, block_lines: int = 512, *, starts=None):
+def _immerkaer_blocks(image, block_lines: int = 512, *, starts=None, with_level: bool = False):
     """|Immerkaer response| on the image interior, block of lines after block (finite values only).
 
-    ``starts``: the first interior line of each block to read (default: every block).
+    ``starts``: the first interior line of each block to read (default: every block). ``with_level``: yield
+    ``(response, level)`` pairs, ``level`` the 3 × 3 mean of the image at the same pixels.
     """
     n = np.shape(image)[0]
     for a in (range(1, n - 1, block_lines) if starts is None else starts):
@@ -150,8 +151,13 @@ def _immerkaer_blocks(image, block_lines: int = 512, *, starts=None):
         b = min(n - 1, a + block_lines)
         sub = np.asarray(image[a - 1:b + 1], dtype=float)
         resp = ndimage.correlate(sub, _IMMERKAER, mode="nearest")[1:-1, 1:-1]
-        resp = np.abs(resp[np.isfinite(resp)])
-        yield resp
+        ok = np.isfinite(resp)
+        if with_level:
+            # a finite response has a finite 3 × 3 neighbourhood: its mean is the level there
+            level = ndimage.uniform_filter(np.where(np.isfinite(sub), sub, 0.0), size=3, mode="nearest")[1:-1, 1:-1]
+            yield np.abs(resp[ok]), level[ok]
+        else:
+            yield np.abs(resp[ok])
 
 
 def _exact_median(blocks, bins: int = 1 << 16) -> float:
@@ -255,17 +261,8 @@ def noise_level_function(image, *, bins: int = NOISE_LEVEL_BINS, max_pixels: int
         raise ValueError(f"image: need at least 3 x 3 pixels, got {shape}")
     if int(bins) < 2:
         raise ValueError(f"bins: must be >= 2, got {bins!r}")
-    resp, level = [], []
-    for a in (range(1, shape[0] - 1, 512) if (starts := _noise_block_starts(shape, int(max_pixels))) is None
-              else starts):
-        b = min(shape[0] - 1, int(a) + 512)
-        sub = np.asarray(image[int(a) - 1:b + 1], dtype=float)
-        r = ndimage.correlate(sub, _IMMERKAER, mode="nearest")[1:-1, 1:-1]
-        m = ndimage.uniform_filter(np.where(np.isfinite(sub), sub, 0.0), size=3, mode="nearest")[1:-1, 1:-1]
-        ok = np.isfinite(r) & np.all(np.isfinite(np.stack([sub[:-2, 1:-1], sub[2:, 1:-1], sub[1:-1, 1:-1]])), axis=0)
-        resp.append(np.abs(r[ok]))
-        level.append(m[ok])
-    resp, level = np.concatenate(resp), np.concatenate(level)
+    blocks = list(_immerkaer_blocks(image, starts=_noise_block_starts(shape, int(max_pixels)), with_level=True))
+    resp, level = np.concatenate([r for r, _ in blocks]), np.concatenate([m for _, m in blocks])
     constant = estimate_image_noise(image, max_pixels=max_pixels)
     if resp.size < int(bins) * NOISE_LEVEL_MIN_PIXELS or not np.ptp(level) > 0:
         return NoiseLevel(read_var=constant ** 2, shot_gain=0.0)
@@ -408,11 +405,9 @@ def _texture(image, *, window, noise_std, max_std, min_contrast, saturation, max
         raise ValueError(f"min_contrast: must be >= 0, got {min_contrast}")
     nodata = ~np.isfinite(img)
     work = np.where(nodata, 0.0, img) if nodata.any() else img
+    # estimated on the image (no data ignored), not on ``work``; validated by expected_matching_std
     sigma = estimate_image_noise(img) if noise_std is None else noise_std
-    if not isinstance(sigma, NoiseLevel) and not (sigma is not None and float(sigma) >= 0):
-        raise ValueError(f"noise_std: must be >= 0, got {noise_std}")
-    std_l, std_c = expected_matching_std(work, window=window, noise_std=sigma if isinstance(sigma, NoiseLevel)
-                                         else float(sigma))
+    std_l, std_c = expected_matching_std(work, window=window, noise_std=sigma)
     ok = (std_l <= max_std) & (std_c <= max_std)
     if min_contrast > 0 or max_level is not None:
         npx = window[0] * window[1]

@@ -15,7 +15,8 @@ from .synthesis import AXES
 __all__ = ["RestorationSettings", "restoration_settings", "settings_dict", "NOISE_MODELS"]
 
 #: ``restoration.noise_model``: the images' noise in the texture criterion (point selection, window width):
-#: "signal_dependent" (read + shot noise, fitted per band: :func:`restore.selection.noise_level_function`) or
+#: "signal_dependent" (read + shot noise: the detector's calibration in product.nc, else fitted on the band,
+#: :func:`restore.stages.band_noise`) or
 #: "constant" (one σ per band, :func:`restore.selection.estimate_image_noise`)
 NOISE_MODELS = ("signal_dependent", "constant")
 
