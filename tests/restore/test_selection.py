@@ -289,8 +289,7 @@ def test_texture_criterion_takes_each_window_at_its_own_noise():
     ok_const = texture_mask(img, window=(3, 31), noise_std=constant, max_std=0.4)
     assert ok_level[dark].mean() > 0.5 and ok_const[dark].mean() < 0.05
     assert ok_level[bright].mean() <= ok_const[bright].mean()
-    # and what it selects is what the matches achieve: the a-priori σ of kept dark windows is right (Monte Carlo
-    # on the patch: the Delon-Rougé σ against the scatter of matches is checked in test_matching)
+    # and the point selection, given the level function, takes points in the dim half too
     pts = select_points(img, per_line=12, window=(3, 31), noise_std=nl, max_std=0.4)
     assert np.sum(pts[1] < 300) > 0.2 * pts[1].size
 
