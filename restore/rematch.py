@@ -11,21 +11,21 @@ of a pixel, nearly a translation over a window). Matching A against it with a
 small search and mapping the match back through the same prediction gives the
 position in B, to be synthesised like any other match.
 
-:func:`geometry_map` and :func:`resample_to_reference` are pure NumPy/OpenCV;
+:func:`geometry_map` and :func:`resample_to_reference` are pure NumPy/SciPy;
 :func:`rematch_pair` wires them to a pair.
 """
 from __future__ import annotations
 
 from dataclasses import replace
 
-import cv2
 import numpy as np
-from scipy.ndimage import map_coordinates
+from scipy.ndimage import map_coordinates, maximum_filter
 
 from .matching import match_points
 from .result import PairData
 
-__all__ = ["geometry_map", "resample_to_reference", "map_back", "rematch_pair", "REMATCH_COLUMN_STEP"]
+__all__ = ["geometry_map", "resample_to_reference", "map_back", "rematch_pair", "REMATCH_COLUMN_STEP",
+           "RESAMPLE_ORDER"]
 
 #: the prediction is computed every this many columns and interpolated in between (it is smooth across a line)
 REMATCH_COLUMN_STEP = 16
@@ -55,16 +55,41 @@ def geometry_map(sm, ahead: str, behind: str, n_lines: int, n_cols: int, *, colu
     return out[0], out[1]
 
 
-def resample_to_reference(image_b: np.ndarray, map_line: np.ndarray, map_col: np.ndarray) -> np.ndarray:
-    """Band B resampled (bicubic) at the mapped positions: B in A's geometry; NaN outside B or at no data."""
-    img = np.asarray(image_b, dtype=np.float32)
-    ml = np.nan_to_num(map_line, nan=-1e6).astype(np.float32)
-    mc = np.nan_to_num(map_col, nan=-1e6).astype(np.float32)
-    # a NaN border value would reach inner pixels through the kernel's zero weights (0 × NaN): replicate the
-    # edge and mask what falls outside instead
-    out = cv2.remap(img, mc, ml, interpolation=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+#: spline order of the resampling of B (:func:`resample_to_reference`)
+RESAMPLE_ORDER = 5
+
+
+def resample_to_reference(image_b: np.ndarray, map_line: np.ndarray, map_col: np.ndarray, *,
+                          order: int = RESAMPLE_ORDER) -> np.ndarray:
+    """Band B resampled at the mapped positions: B in A's geometry; NaN outside B or near its no-data pixels.
+
+    An interpolating B-spline of ``order`` (SciPy's prefiltered
+    :func:`~scipy.ndimage.map_coordinates`), exact for polynomials up to that
+    degree. Not OpenCV's bicubic: its kernel (Keys, ``a = −0.75``) does not
+    reproduce a linear ramp (at a fractional offset of 0.05 px it samples
+    0.071 px), its weights are tabulated in 1/32 px, and the resampled band
+    is displaced by up to 0.05 px depending on the map's fractional part: on a
+    band-limited texture sheared by 1 px over 40 lines, with the exact map,
+    the rematched positions were 0.016 px RMS off (gain 1.012 on the shift);
+    quintic 0.0002 px.
+
+    No-data pixels (NaN) are filled with the band's median for the prefilter
+    (which reaches the whole image) and every output whose ``order + 1``-pixel
+    support touches one is NaN.
+    """
+    img = np.asarray(image_b, dtype=np.float64)
+    ml = np.nan_to_num(np.asarray(map_line, dtype=np.float64), nan=-1e6)
+    mc = np.nan_to_num(np.asarray(map_col, dtype=np.float64), nan=-1e6)
+    bad = ~np.isfinite(img)
+    if bad.any():
+        img = np.where(bad, np.median(img[~bad]) if (~bad).any() else 0.0, img)
+    out = map_coordinates(img, [ml, mc], order=int(order), mode="mirror")
     inside = (ml >= 1) & (ml <= img.shape[0] - 2) & (mc >= 1) & (mc <= img.shape[1] - 2)
-    return np.where(inside, out, np.nan)
+    if bad.any():
+        near = maximum_filter(bad.astype(np.uint8), size=int(order) + 2)
+        inside &= map_coordinates(near, [np.clip(ml, 0, img.shape[0] - 1), np.clip(mc, 0, img.shape[1] - 1)],
+                                  order=0, mode="nearest") == 0
+    return np.where(inside, out, np.nan).astype(np.float32)
 
 
 def map_back(map_line: np.ndarray, map_col: np.ndarray, lines, cols, *, window_lines: int = 1
