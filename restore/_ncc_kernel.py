@@ -39,8 +39,9 @@ _BLOCK = 64
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _lanczos(d, order, sk, ck, out):
-    """Normalised Lanczos weights of taps -order..order for a shift d in (-1, 1).
+def _lanczos(d, order, sk, ck, corr, out):
+    """Normalised Lanczos weights of taps -order..order for a shift d in (-1, 1), exact for polynomials
+    up to the degree of ``corr`` (:func:`restore.matching.lanczos_weights`).
 
     ``sinc(x) sinc(x / a)`` with ``x = k - d`` is ``-a sin(pi d) (-1)^k
     sin(pi x / a) / (pi x)^2``; by angle addition it needs the tables
@@ -65,6 +66,17 @@ def _lanczos(d, order, sk, ck, out):
         tot += v
     for t in range(n):
         out[t] /= tot
+    # the smallest change that makes the weights exact for powers of d up to corr's degree
+    # (restore.matching.polynomial_correction, its row for the sign of d)
+    row = 0 if d > 0.0 else 1
+    deg = corr.shape[2]
+    for p in range(deg):
+        m = 0.0
+        for t in range(n):
+            m += out[t] * float(t - order) ** p
+        r = d ** p - m
+        for t in range(n):
+            out[t] += corr[row, t, p] * r
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -232,7 +244,7 @@ def _inverse_rows(n00, n01, n02, n11, n12, n22):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _sample_b(b_big, il, ic, d_l, d_c, at_peak, h, w, order, sk, ck, wl, wc, rows, bres):
+def _sample_b(b_big, il, ic, d_l, d_c, at_peak, h, w, order, sk, ck, corr, wl, wc, rows, bres):
     """B at the current position into ``bres`` (h, w): the window on the integer
     base ``(il, ic)`` if ``at_peak``, else resampled at ``(d_l, d_c)`` from it."""
     if at_peak:
@@ -242,8 +254,8 @@ def _sample_b(b_big, il, ic, d_l, d_c, at_peak, h, w, order, sk, ck, wl, wc, row
             for j in range(w):
                 br[j] = src[j]
         return
-    _lanczos(d_l, order, sk, ck, wl)
-    _lanczos(d_c, order, sk, ck, wc)
+    _lanczos(d_l, order, sk, ck, corr, wl)
+    _lanczos(d_c, order, sk, ck, corr, wc)
     taps = 2 * order + 1
     wcol = w + 2 * order
     # separable resampling; the tap loops are outside, so the
@@ -341,7 +353,7 @@ def _small_step(st_l, st_c, tol, sb, q0, gain, npx, i11, i22):
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _refine(b_big, jac, il, ic, h, w, sl, sc, order, max_iter, tol, m1, m2, inv_a2, n00, n01, n02,
-            i10, i11, i12, i20, i21, i22, sk, ck, wl, wc, rows, bres):
+            i10, i11, i12, i20, i21, i22, sk, ck, corr, wl, wc, rows, bres):
     """Sub-pixel Gauss-Newton / Broyden iterations of one point from its integer peak.
 
     Returns ``(il, ic, d_l, d_c, st0, st3, converged, gave_up)``: the final
@@ -360,7 +372,7 @@ def _refine(b_big, jac, il, ic, h, w, sl, sc, order, max_iter, tol, m1, m2, inv_
     converged = False
     gave_up = False
     for it in range(max_iter + 1):
-        _sample_b(b_big, il, ic, d_l, d_c, it == 0, h, w, order, sk, ck, wl, wc, rows, bres)
+        _sample_b(b_big, il, ic, d_l, d_c, it == 0, h, w, order, sk, ck, corr, wl, wc, rows, bres)
         b_sum, q0, q1, q2, sb = _b_products(bres, jac, h, w, m1, m2)
         st0 = q0
         st3 = sb
@@ -442,7 +454,7 @@ def _final_flags(off_l, off_c, d_l, d_c, sl, sc, quality, std_l, std_c, singular
 
 @njit(cache=True, error_model="numpy")
 def _match_one(image_a, image_b, la, ca, pl, pc, h, w, sl, sc, order, max_iter, tol, min_quality, max_std,
-               a_patch, b_big, jac, rows, bres, wl, wc, sk, ck, prod, colacc, colsq, out):
+               a_patch, b_big, jac, rows, bres, wl, wc, sk, ck, corr, prod, colacc, colsq, out):
     """Match one point; writes line_b, col_b, quality, flags, std_l, std_c into ``out``.
 
     Structure: the steps of :func:`restore.matching._match_chunk`, per point,
@@ -538,7 +550,7 @@ def _match_one(image_a, image_b, la, ca, pl, pc, h, w, sl, sc, order, max_iter, 
         inv_a2 = 1.0 / a_norm2 if a_norm2 > 0 else 1.0
         il, ic, d_l, d_c, st0, st3, converged, gave_up = _refine(
             b_big, jac, il, ic, h, w, sl, sc, order, max_iter, tol, m1, m2, inv_a2, n00, n01, n02,
-            i10, i11, i12, i20, i21, i22, sk, ck, wl, wc, rows, bres)
+            i10, i11, i12, i20, i21, i22, sk, ck, corr, wl, wc, rows, bres)
     # --- 7. quality, precision and flags ------------------------------------------
     quality, std_l, std_c = _quality_std(st0, st3, peak, a_norm, a_norm2, i11, i22, npx, hopeless, singular)
     off_l = (il - sl) + d_l
@@ -554,8 +566,10 @@ def _match_one(image_a, image_b, la, ca, pl, pc, h, w, sl, sc, order, max_iter, 
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
-def match_ncc(image_a, image_b, la, ca, pl, pc, h, w, sl, sc, order, max_iter, tol, min_quality, max_std):
+def match_ncc(image_a, image_b, la, ca, pl, pc, h, w, sl, sc, order, max_iter, tol, min_quality, max_std, corr):
     """Match every point; returns an (N, 6) array of line_b, col_b, quality, flags, std_l, std_c.
+
+    ``corr``: :func:`restore.matching.polynomial_correction` of ``order`` (B's interpolation weights).
 
     ``max_std <= 0`` means no precision requirement.
     """
@@ -584,5 +598,5 @@ def match_ncc(image_a, image_b, la, ca, pl, pc, h, w, sl, sc, order, max_iter, t
         colsq = np.empty(wide)
         for p in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
             _match_one(image_a, image_b, la[p], ca[p], pl[p], pc[p], h, w, sl, sc, order, max_iter, tol,
-                       min_quality, max_std, a_patch, b_big, jac, rows, bres, wl, wc, sk, ck, prod, colacc, colsq, out[p])
+                       min_quality, max_std, a_patch, b_big, jac, rows, bres, wl, wc, sk, ck, corr, prod, colacc, colsq, out[p])
     return out

@@ -24,7 +24,7 @@ from scipy.ndimage import map_coordinates, maximum_filter
 from .matching import match_points
 from .result import PairData
 
-__all__ = ["geometry_map", "resample_to_reference", "map_back", "rematch_pair", "REMATCH_COLUMN_STEP",
+__all__ = ["geometry_map", "resample_to_reference", "read_map", "map_back", "rematch_pair", "REMATCH_COLUMN_STEP",
            "RESAMPLE_ORDER"]
 
 #: the prediction is computed every this many columns and interpolated in between (it is smooth across a line)
@@ -92,9 +92,42 @@ def resample_to_reference(image_b: np.ndarray, map_line: np.ndarray, map_col: np
     return np.where(inside, out, np.nan).astype(np.float32)
 
 
+def read_map(m: np.ndarray, lines, cols) -> np.ndarray:
+    """A map (line, column) read at fractional positions: cubic Lagrange through the four lines around each
+    position (exact for a cubic in the line), linear between columns (the map is computed every
+    :data:`REMATCH_COLUMN_STEP` columns and linear in between). Positions outside are clamped to the edge;
+    a NaN in the support gives NaN.
+
+    Not bilinear: jitter bends the map from line to line (a 148 Hz line of 1 px at 0.4 ms per line turns
+    by 0.05 px per line²), and a linear read between lines at the matched fraction was off by up to
+    ``t (1 − t) / 2`` of that, coherently with the shift itself: with a map holding 70 % of a 1 px
+    shear over 20 lines, the rematched shift came out with a gain of 0.992 (cubic: 0.998).
+    """
+    m = np.asarray(m, dtype=np.float64)
+    n_l, n_c = m.shape
+    li = np.clip(np.asarray(lines, dtype=np.float64), 0.0, n_l - 1.0)
+    ci = np.clip(np.asarray(cols, dtype=np.float64), 0.0, n_c - 1.0)
+    l0 = np.minimum(np.floor(li).astype(np.int64), n_l - 2) if n_l > 1 else np.zeros(li.shape, np.int64)
+    c0 = np.minimum(np.floor(ci).astype(np.int64), n_c - 2) if n_c > 1 else np.zeros(ci.shape, np.int64)
+    t = li - l0
+    u = (ci - c0)[..., None]
+    # Lagrange weights of nodes -1, 0, 1, 2 at t
+    w = np.stack([-t * (t - 1) * (t - 2) / 6, (t + 1) * (t - 1) * (t - 2) / 2, -(t + 1) * t * (t - 2) / 2,
+                  (t + 1) * t * (t - 1) / 6], axis=-1)
+    rows = np.clip(l0[..., None] + np.arange(-1, 3), 0, n_l - 1)
+    c1 = np.minimum(c0 + 1, n_c - 1)[..., None]
+    vals = (1 - u) * m[rows, c0[..., None]] + u * m[rows, c1]
+    if n_l > 1:
+        # at the edges, the nodes beyond are clamped: extrapolate them linearly instead (the map is smooth)
+        lo, hi = l0[..., None] + np.arange(-1, 3) < 0, l0[..., None] + np.arange(-1, 3) > n_l - 1
+        vals = np.where(lo, 2 * vals[..., 1:2] - vals[..., 2:3], vals)
+        vals = np.where(hi, 2 * vals[..., 2:3] - vals[..., 1:2], vals)
+    return np.sum(w * vals, axis=-1)
+
+
 def map_back(map_line: np.ndarray, map_col: np.ndarray, lines, cols, *, window_lines: int = 1
              ) -> tuple[np.ndarray, np.ndarray]:
-    """Positions in B of fractional positions (lines, cols) of the resampled band (bilinear on the maps).
+    """Positions in B of fractional positions (lines, cols) of the resampled band (:func:`read_map`).
 
     A match on raw bands measures the displacement averaged over the window's
     ``window_lines`` rows (the restoration deconvolves that average,
@@ -110,11 +143,9 @@ def map_back(map_line: np.ndarray, map_col: np.ndarray, lines, cols, *, window_l
     half = (int(window_lines) - 1) // 2
     out = []
     for k, m in enumerate((map_line, map_col)):
-        m = np.asarray(m, dtype=np.float64)
         acc = np.zeros(li.size)
         for r in range(-half, half + 1):
-            v = map_coordinates(m, np.vstack([li + r, ci]), order=1, mode="nearest")
-            acc += v - (r if k == 0 else 0.0)
+            acc += read_map(m, li + r, ci) - (r if k == 0 else 0.0)
         out.append(np.where(ok, acc / (2 * half + 1), np.nan))
     return out[0], out[1]
 
