@@ -287,8 +287,9 @@ def spikes(residual: np.ndarray, *, n_sigma: float, size: int = 9, max_fraction:
     attitude. Lines that depart that far *in runs* are the model's misfit,
     not failed lines (at several pixels of jitter the integration misses part
     of it where the attitude moves fastest, a few lines at a time): when more
-    than ``max_fraction`` of the lines (and more than 4) do, the model is
-    what fails and nothing is flagged. ``n_sigma <= 0``: none.
+    than ``max_fraction`` of the lines (and more than ``size``: one running
+    median's worth, a local misfit) do, the model is what fails and nothing
+    is flagged. ``n_sigma <= 0``: none.
     """
     from scipy.ndimage import median_filter
 
@@ -304,7 +305,7 @@ def spikes(residual: np.ndarray, *, n_sigma: float, size: int = 9, max_fraction:
         return out
     far = np.abs(r) > n_sigma * sigma
     alone = far & ~np.r_[False, far[:-1]] & ~np.r_[far[1:], False]
-    if (far & ~alone).sum() > max(4.0, max_fraction * v.size):
+    if (far & ~alone).sum() > max(float(size), max_fraction * v.size):
         return out
     out[np.flatnonzero(ok)[alone]] = True
     return out
