@@ -83,6 +83,7 @@ __all__ = [
     "lanczos_weights",
     "polynomial_correction",
     "EXACT_DEGREE",
+    "exact_degree_for",
     "resample_windows",
 ]
 
@@ -163,8 +164,15 @@ class MatchResult:
 # interpolation
 
 
-#: the matcher's interpolation weights reproduce every polynomial up to this degree (:func:`lanczos_weights`)
+#: the matcher's interpolation weights reproduce every polynomial up to this degree (:func:`lanczos_weights`;
+#: at most ``2 order - 1``, :func:`exact_degree_for`)
 EXACT_DEGREE = 3
+
+
+def exact_degree_for(order: int) -> int:
+    """The matcher's :data:`EXACT_DEGREE` for an interpolation ``order``: ``2 order`` taps fit at most degree
+    ``2 order - 1``."""
+    return min(EXACT_DEGREE, 2 * int(order) - 1)
 
 
 def lanczos_weights(shift, *, order: int = 4, exact_degree: int = 0) -> np.ndarray:
@@ -231,8 +239,11 @@ def polynomial_correction(order: int, degree: int) -> np.ndarray:
     return out
 
 
-def _lanczos_weights(d: np.ndarray, order: int, exact_degree: int = EXACT_DEGREE) -> np.ndarray:
-    """:func:`lanczos_weights` without checks, for any shape of ``d`` (taps last)."""
+def _lanczos_weights(d: np.ndarray, order: int, exact_degree: int | None = None) -> np.ndarray:
+    """:func:`lanczos_weights` without checks, for any shape of ``d`` (taps last); ``exact_degree`` None: the
+    matcher's (:func:`exact_degree_for`)."""
+    if exact_degree is None:
+        exact_degree = exact_degree_for(order)
     k = np.arange(-order, order + 1, dtype=float)
     x = k - d[..., None]
     # sinc(x) sinc(x/a) = -a sin(pi d) (-1)^k sin(pi x / a) / (pi x)^2; the
@@ -279,8 +290,8 @@ def resample_windows(patches: np.ndarray, shift_lines, shift_cols, *, order: int
     if h < 1 or w < 1:
         raise ValueError(f"patches: need more than {m} lines and columns, got {patches.shape}")
     dtype = patches.dtype if patches.dtype in (np.float32, np.float64) else np.float64
-    wl = lanczos_weights(shift_lines, order=order, exact_degree=EXACT_DEGREE).astype(dtype)
-    wc = lanczos_weights(shift_cols, order=order, exact_degree=EXACT_DEGREE).astype(dtype)
+    wl = lanczos_weights(shift_lines, order=order, exact_degree=exact_degree_for(order)).astype(dtype)
+    wc = lanczos_weights(shift_cols, order=order, exact_degree=exact_degree_for(order)).astype(dtype)
     if wl.shape[0] != patches.shape[0] or wc.shape[0] != patches.shape[0]:
         raise ValueError("shift_lines, shift_cols: need one shift per patch")
     return _resample(patches, wl, wc)
@@ -594,7 +605,7 @@ def _match_compiled(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, min_quali
     with _KERNEL_LOCK:
         out = match_ncc(image_a, image_b, la, ca, pl, pc, h, w, sl, sc, order, max_iter, tol,
                         min_quality, -1.0 if max_std is None else float(max_std),
-                        polynomial_correction(order, EXACT_DEGREE))
+                        polynomial_correction(order, exact_degree_for(order)))
     flags = out[:, 3].astype(np.int64)
     return MatchResult(line_b=out[:, 0].copy(), col_b=out[:, 1].copy(), quality=out[:, 2].copy(), valid=flags == 0,
                        flags=flags, std_line=out[:, 4].copy(), std_col=out[:, 5].copy())

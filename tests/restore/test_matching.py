@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from reports.synthetic import synthetic_pairs
-from restore.matching import (MatchFlag, lanczos_weights, match_points, resample_windows,
+from restore.matching import (MatchFlag, exact_degree_for, lanczos_weights, match_points, resample_windows,
                               support_margin)
 
 
@@ -192,6 +192,10 @@ def test_lanczos_weights_exact_for_cubics():
     assert np.array_equal(w[0], np.eye(9)[4])
     assert np.allclose(w[3][:8], w[3][7::-1]) and w[3][8] == 0.0 and w[4][0] == 0.0
     assert np.abs(w - plain).max() < 0.01
+    # two taps (order 1) fit a ramp at most: the matcher asks no more of them
+    assert exact_degree_for(1) == 1 and exact_degree_for(4) == 3
+    w1 = lanczos_weights([0.3, -0.6], order=1, exact_degree=exact_degree_for(1))
+    np.testing.assert_allclose((w1 * np.arange(-1, 2)).sum(axis=1), [0.3, -0.6], atol=1e-12)
 
 
 def _band_limited_texture(lines, cols, *, max_cycles, seed=3, n=300):
