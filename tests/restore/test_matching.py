@@ -5,6 +5,7 @@ import pytest
 from reports.synthetic import synthetic_pairs
 from restore.matching import (MatchFlag, exact_degree_for, lanczos_weights, match_points, resample_windows,
                               support_margin)
+from support.textures import band_limited_texture
 
 
 def _errors(res, data):
@@ -198,29 +199,17 @@ def test_lanczos_weights_exact_for_cubics():
     np.testing.assert_allclose((w1 * np.arange(-1, 2)).sum(axis=1), [0.3, -0.6], atol=1e-12)
 
 
-def _band_limited_texture(lines, cols, *, max_cycles, seed=3, n=300):
-    """Sum of cosines below ``max_cycles`` cycle/px: sampled exactly at any shift (no interpolation)."""
-    rng = np.random.default_rng(seed)
-    kl, kc = rng.uniform(-max_cycles, max_cycles, n), rng.uniform(-max_cycles, max_cycles, n)
-    ph = rng.uniform(0, 2 * np.pi, n)
-    amp = np.exp(-(kl ** 2 + kc ** 2) / (0.43 * max_cycles) ** 2) * rng.standard_normal(n)
-    out = np.zeros(np.broadcast(lines, cols).shape)
-    for i in range(n):
-        out += amp[i] * np.cos(2 * np.pi * (kl[i] * lines + kc[i] * cols) + ph[i])
-    return 100 + 20 * out
-
-
 @pytest.mark.parametrize("backend", ["numpy", "compiled"])
 def test_no_pixel_locking_on_smooth_texture(backend):
     """Known sub-pixel shifts of a smooth texture are measured without a pull towards whole pixels: the mean
     error at 0.1-0.4 px stays under 0.001 px (the plain Lanczos-4 resampling of B gave -0.005 to -0.008)."""
     n = 240
     lines, cols = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float), indexing="ij")
-    a = _band_limited_texture(lines, cols, max_cycles=0.2)
+    a = band_limited_texture(lines, cols, max_cycles=0.2)
     rng = np.random.default_rng(4)
     la, ca = rng.uniform(30, n - 30, 300).round(), rng.uniform(30, n - 30, 300).round()
     for shift in (0.1, 0.2, 0.3, 0.4):
-        b = _band_limited_texture(lines - shift, cols + 0.5 * shift, max_cycles=0.2)  # b(l + s, c - s/2) = a(l, c)
+        b = band_limited_texture(lines - shift, cols + 0.5 * shift, max_cycles=0.2)  # b(l + s, c - s/2) = a(l, c)
         m = match_points(a, b, la, ca, la, ca, window=(3, 31), search=(2, 2), backend=backend)
         v = m.valid
         assert v.mean() > 0.95

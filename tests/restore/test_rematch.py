@@ -7,6 +7,7 @@ from restore.matching import match_points
 from restore.rematch import geometry_map, map_back, rematch_pair, resample_to_reference
 from restore.result import PairData
 from restore.stages import line_rate_px, rematch_passes
+from support.textures import band_limited_texture
 
 N, M = 600, 160
 
@@ -123,16 +124,9 @@ def test_estimate_change_is_the_worst_axis_rms_without_the_mean():
     assert abs(estimate_change_px(before, after, ("roll",), ifov) - 0.02) < 1e-3
 
 
-def _band_limited(lines, cols, seed=3, n=300):
-    """An analytic texture (sum of cosines below 0.35 cycle/px) that can be sampled exactly anywhere."""
-    rng = np.random.default_rng(seed)
-    kl, kc = rng.uniform(-0.35, 0.35, n), rng.uniform(-0.35, 0.35, n)
-    ph = rng.uniform(0, 2 * np.pi, n)
-    amp = np.exp(-(kl ** 2 + kc ** 2) / 0.15 ** 2) * rng.standard_normal(n)
-    out = np.zeros(np.broadcast(lines, cols).shape)
-    for i in range(n):
-        out += amp[i] * np.cos(2 * np.pi * (kl[i] * lines + kc[i] * cols) + ph[i])
-    return 100 + 20 * out
+def _band_limited(lines, cols):
+    """An analytic texture below 0.35 cycle/px that can be sampled exactly anywhere."""
+    return band_limited_texture(lines, cols, max_cycles=0.35, width=0.15)
 
 
 def _sheared_pair(period, amplitude, map_fraction, *, window, seed):
