@@ -173,7 +173,8 @@ def _with_blind_tone(res, prior, spec, diffs, measured, taus, dt, opts, data, la
     took blind_frequencies' roll from 0.0306 to 0.0351 px (restore only; the
     other tone scenarios within ± 0.0004 px)."""
     tones = blind_tones(measured, taus, dt, psd=(prior.freq, prior.psd), noise_std=prior.noise_std,
-                        weights=data.get("weights"), lags=lags, base_objective=getattr(res, "objective", None))
+                        weights=data.get("weights"), lags=lags, base_objective=getattr(res, "objective", None),
+                        base_prediction=getattr(res, "predicted", None))
     if tones is None:
         return res, prior
     fixed = spec.frozen_options(opts, prior)

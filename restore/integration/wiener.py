@@ -246,6 +246,12 @@ class WienerResult:
         Conjugate-gradient iterations.
     residual : float
         Final relative residual of the normal equations.
+    objective : float
+        The MAP objective at the solution (−2 log posterior, white noise model).
+    predicted : ndarray
+        (pair, sample) differentials the solution predicts (tones included), NaN where none was measured.
+    tones : ndarray or None
+        The tones' coefficients, when ``tones`` was given.
     """
 
     def __init__(self, theta, theta_full, spectrum, iterations, residual, theta_grid=None):
@@ -525,6 +531,7 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
         r = WienerResult(theta, full - np.mean(full), spec, it, res, theta_grid=grid - np.mean(full))
         r.tones = coefs
         r.objective = objective
+        r.predicted = np.where(valid, pred, np.nan)
         return r
     return theta
 
@@ -552,7 +559,7 @@ def common_blind_frequencies(taus, dt: float, record_s: float, top_hz: float) ->
 
 def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: float = 1e-6,
                 maxiter: int = 300, false_alarm: float = 1e-8, max_tones: int | None = None, order: int = 2,
-                max_order: int = 4, base_objective: float | None = None):
+                max_order: int = 4, base_objective: float | None = None, base_prediction=None):
     """A tone on a frequency every pair is blind to, seen through the per-line lags: ``(frequencies, sd, order)``
     or None.
 
@@ -564,7 +571,8 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     solved with one tone of broad prior added, at the blind frequency and
     ± half and one resolution bin, and at the line the pairs see directly
     inside the notch the spectrum estimate leaves unestimated around it, if
-    any (:func:`notch_peaks`); the tone that lowers the MAP objective most
+    any (:func:`notch_peaks`, on what the MAP without a tone leaves
+    unexplained); the tone that lowers the MAP objective most
     is kept if the drop exceeds what pure noise gives with probability
     ``false_alarm`` over all the candidates (a generalised likelihood ratio,
     χ² with the tone's coefficients: where the field already explains the
@@ -580,9 +588,17 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     harmonic's do: on that scenario the roll error 0.050 → 0.029 px with
     ``order = 2``, none with 1); once the tones are chosen the degree rises
     by 2 at a time up to ``max_order`` while the data call for it
-    (:func:`tone_order`; ``max_order = order``: never). ``base_objective``:
-    the objective of the same MAP without a tone, when the caller has solved
-    it already.
+    (:func:`tone_order`; ``max_order = order``: never). ``base_objective``,
+    ``base_prediction``: the objective and the predicted differentials
+    (:attr:`WienerResult.predicted`) of the same MAP without a tone, when the
+    caller has solved it already.
+
+    The notch's line is looked for in the residual of that MAP, not in the
+    differentials: at large amplitude the lags' sidebands of lines outside
+    the notch (70 + 61 Hz of a CMG's harmonics at 2 px, 131 Hz) are stronger
+    in the differentials than a line inside it, and the MAP explains them (on
+    an unseen 2 px CMG scene the raw differentials' peak was that sideband, the
+    residual's the 140 Hz line, 0.3 px, which then went unrestored in pitch).
 
     The χ² holds under the noise model. Where the data carry misfit it does
     not model (at 3 px of jitter and more the matching errs with the signal,
@@ -619,14 +635,18 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     offsets = (-1.0, -0.5, 0.0, 0.5, 1.0)
     # (frequency, the notch it belongs to): at most one tone per notch
     candidates = [(fc + k / record_s, i) for i, fc in enumerate(centres) for k in offsets]
-    candidates += [(fk, i) for i, fk in notch_peaks(D, valid, taus_a, dt, noise_std, centres,
+    if base_objective is None or base_prediction is None:
+        first = solve(None)
+        base_objective, base_prediction = first.objective, first.predicted
+    left = np.where(valid, D - np.nan_to_num(np.asarray(base_prediction, dtype=np.float64)), 0.0)
+    candidates += [(fk, i) for i, fk in notch_peaks(left, valid, taus_a, dt, noise_std, centres,
                                                     exclude_hz=1.5 / record_s, false_alarm=false_alarm)]
     # the objective's drop is −2 log of a likelihood ratio: χ² with the tone's 2(order + 1) coefficients
     # under no tone, over every candidate tried (Bonferroni)
     threshold = float(chi2.isf(false_alarm / len(candidates), 2 * (order + 1)))
     chosen: list = []
     used: set = set()
-    base = solve(None).objective if base_objective is None else float(base_objective)
+    base = float(base_objective)
     for _ in range(centres.size if max_tones is None else min(int(max_tones), centres.size)):
         gains = []
         for fk, i in candidates:
