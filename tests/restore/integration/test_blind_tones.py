@@ -39,11 +39,12 @@ def _record(tone_rad, n=4000, noise_px=0.08, seed=0):
     return t, theta(t), diffs, lags
 
 
-def _seen_through_lags(theta, t, rng, noise_px=0.08):
-    """Each pair's differentials of ``theta`` at the lags the CMG lines set, with white noise (as _record)."""
+def _seen_through_lags(theta, t, rng, noise_px=0.08, along=_cmg):
+    """Each pair's differentials of ``theta`` at the lags the along-track attitude ``along`` sets (the CMG lines
+    by default), with white noise (as _record)."""
     diffs, lags = [], []
     for tau in TAUS:
-        lag = (_cmg(t + tau) - _cmg(t)) / IFOV * DT
+        lag = (along(t + tau) - along(t)) / IFOV * DT
         diffs.append(theta(t + tau + lag) - theta(t) + noise_px * IFOV * rng.standard_normal(t.size))
         lags.append(lag)
     return diffs, lags
@@ -292,11 +293,7 @@ def test_a_sideband_of_lines_outside_the_notch_does_not_hide_the_line_inside_it(
         return (8e-6 * (np.sin(2 * np.pi * 61.1 * x + 0.2) + np.sin(2 * np.pi * 69.8 * x + 1.1))
                 + 1.7e-6 * np.sin(2 * np.pi * f_line * x + 0.5))
 
-    diffs, lags = [], []
-    for tau in TAUS:
-        lag = (theta(t + tau) - theta(t)) / IFOV * DT
-        diffs.append(theta(t + tau + lag) - theta(t) + 0.15 * IFOV * rng.standard_normal(n))
-        lags.append(lag)
+    diffs, lags = _seen_through_lags(theta, t, rng, noise_px=0.15, along=theta)
     D, valid, taus, dt = prepare(diffs, TAUS, DT)
     centres = common_blind_frequencies(TAUS, DT, n * DT, 300.0)
     raw = notch_peaks(D, valid, taus, dt, np.full(3, 0.15 * IFOV), centres, exclude_hz=1.5 / (n * DT))
