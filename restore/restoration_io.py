@@ -186,6 +186,8 @@ def _integration_variables(res: RestorationResult) -> tuple[dict, dict]:
                              blind_tone_prior_sd_rad=float(rec.spectrum.tones[1]))
                 if len(rec.spectrum.tones) > 2:
                     attrs["blind_tone_order"] = int(rec.spectrum.tones[2])
+                if len(rec.spectrum.tones) > 3 and rec.spectrum.tones[3] is not None:  # each tone's sweep rate
+                    attrs["blind_tone_chirp_hz_per_s"] = np.asarray(rec.spectrum.tones[3], dtype=np.float64)
             data[f"prior_noise_std_{a}"] = ("pair", nstd, attrs)
             if rec.spectrum.noise_colour is not None:  # the noise colour the MAP weighed the residual with
                 fc, col = rec.spectrum.noise_colour
@@ -314,6 +316,8 @@ def _records_from(ds, info: dict) -> dict:
                               float(at["blind_tone_prior_sd_rad"]))
                 if "blind_tone_order" in at:
                     spec.tones += (int(at["blind_tone_order"]),)
+                    if "blind_tone_chirp_hz_per_s" in at:
+                        spec.tones += ([float(x) for x in np.atleast_1d(at["blind_tone_chirp_hz_per_s"])],)
             if f"prior_noise_colour_{a}" in ds.variables:
                 spec.noise_colour = (np.asarray(ds[f"colour_freq_{a}"].values, dtype=np.float64),
                                      _values(ds, f"prior_noise_colour_{a}")[idx])

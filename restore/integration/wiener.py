@@ -35,7 +35,8 @@ from .gaps import estimable_mask
 from .spectrum import SpectralEstimate, estimate_spectrum, notch_mask
 
 __all__ = ["integrate_inverse", "integrate_wiener_fft", "integrate_wiener", "WienerResult", "spectrum_for_lines",
-           "lag_interpolation", "tone_order", "ceiling_on_grid"]
+           "lag_interpolation", "tone_order", "tone_sweep", "tone_waves", "tone_phase", "tone_chirps",
+           "ceiling_on_grid"]
 
 
 def _grid(n: int, taus: np.ndarray, dt: float, pad_fraction: float, max_lag_s: float = 0.0) -> int:
@@ -72,26 +73,45 @@ def _modulation(n_record: int, t: np.ndarray, dt: float, order: int) -> list:
     return [((t - mid) / half) ** k for k in range(order + 1)]
 
 
-def tone_waves(freqs, n: int, dt: float, order: int = 0, n_record: int | None = None) -> np.ndarray:
+def tone_phase(freqs, t: np.ndarray, mid: float, chirps=None) -> np.ndarray:
+    """(samples, tones) phase [rad] of tones of frequency ``freqs`` [Hz] at the record's middle ``mid`` [s],
+    each sweeping at its ``chirps`` rate [Hz/s] (None: none): ``2π (f t + c (t − mid)² / 2)``."""
+    ph = np.asarray(freqs, dtype=np.float64)[None, :] * t[:, None]
+    if chirps is not None:
+        ph = ph + 0.5 * np.asarray(chirps, dtype=np.float64)[None, :] * ((t - mid) ** 2)[:, None]
+    return 2 * np.pi * ph
+
+
+def tone_chirps(tones):
+    """The sweep rates [Hz/s] of a ``tones`` tuple ``(frequencies, sd[, order[, chirps]])``, None without."""
+    return None if tones is None or len(tones) < 4 or tones[3] is None else \
+        np.atleast_1d(np.asarray(tones[3], dtype=np.float64))
+
+
+def tone_waves(freqs, n: int, dt: float, order: int = 0, n_record: int | None = None,
+               chirps=None) -> np.ndarray:
     """(n, 2q(order+1)) columns cos, sin of each frequency at ``k dt``, times 1, t′, … t′^order (t′ the
-    time from the record's middle in half records)."""
+    time from the record's middle in half records); ``chirps`` [Hz/s]: each tone's frequency sweeps at that
+    rate, ``freqs`` being the one at the record's middle (:func:`tone_phase`)."""
     t = np.arange(n) * dt
-    ph = 2 * np.pi * np.asarray(freqs, dtype=np.float64)[None, :] * t[:, None]
-    mods = _modulation(n if n_record is None else n_record, t, dt, order)
+    nr = n if n_record is None else n_record
+    ph = tone_phase(freqs, t, 0.5 * (nr - 1) * dt, chirps)
+    mods = _modulation(nr, t, dt, order)
     return np.concatenate([np.cos(ph) * m[:, None] for m in mods] + [np.sin(ph) * m[:, None] for m in mods], axis=1)
 
 
 def tone_columns(tones, n: int, taus, dt: float, lags) -> tuple:
     """Differentials (pair, sample, 2q(order+1)) of unit cos / sin tones (times 1, t′, …), with the lags, and
-    their prior sd."""
+    their prior sd (``tones``: ``(frequencies, sd[, order[, chirps]])``)."""
     freqs, sd = np.atleast_1d(np.asarray(tones[0], dtype=np.float64)), float(tones[1])
     order = int(tones[2]) if len(tones) > 2 else 0
+    chirps = tone_chirps(tones)
     t = np.arange(n) * dt
-    now = tone_waves(freqs, n, dt, order)
+    now = tone_waves(freqs, n, dt, order, chirps=chirps)
     cols = []
     for j, tau in enumerate(taus):
         t1 = t + tau + (np.zeros(n) if lags is None else lags[j])
-        ph = 2 * np.pi * freqs[None, :] * t1[:, None]
+        ph = tone_phase(freqs, t1, 0.5 * (n - 1) * dt, chirps)
         mods = _modulation(n, t1, dt, order)
         cols.append(np.concatenate([np.cos(ph) * m[:, None] for m in mods] + [np.sin(ph) * m[:, None] for m in mods],
                                    axis=1) - now)
@@ -292,7 +312,9 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
     white at the grid's frequencies (the noise covariance becomes
     ``W^-1/2 C W^-1/2``, see :func:`_colour_weighting`).
     Returns (theta on the record, theta on the grid, predicted differentials,
-    iterations, residual[, extra parameters]).
+    iterations, residual, extra parameters or None, ``rᵀ z``: the normal
+    equations' residual times the iterate, by which ``Dᵀ W (D − A z)`` exceeds
+    the quadratic's value at the iterate when the iteration stopped short).
     """
     p, n = D.shape
     c = np.sqrt(S / dt)
@@ -374,9 +396,12 @@ def _cg_solve(D, valid, taus, dt, freq, S, sigma, m, *, tol, maxiter, theta0=Non
         d = y + (ry_new / ry) * d
         ry = ry_new
     grid = irfft(c * rfft(z[:m]), n=m)
+    # the quadratic at the iterate is Dᵀ W D − bᵀ z − rᵀ z: what the identity Dᵀ W (D − A z) misses short of
+    # the minimum (its error first order in z − z*, the quadratic's second order)
+    short = float(np.sum(r * z))
     if q:
-        return grid[:n], grid, forward(z), it, res, z[m:] * np.asarray(extra[1], dtype=np.float64)
-    return grid[:n], grid, forward(z), it, res
+        return grid[:n], grid, forward(z), it, res, z[m:] * np.asarray(extra[1], dtype=np.float64), short
+    return grid[:n], grid, forward(z), it, res, None, short
 
 
 def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction: float = 0.5,
@@ -517,13 +542,19 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
                               for j in range(p)])
         filled = np.where(valid, D, pred)
         spec = estimate_spectrum(filled, taus, dt, n_fft=m, noise_std=sigma, **opts)
-    coefs = out[5] if tones is not None else None
-    # the MAP objective at its minimum, ‖u‖² + ‖D − A u‖²_W = Dᵀ W (D − A u) (the quadratic's identity)
+    coefs = out[5]
+    # the MAP objective ‖u‖² + ‖D − A u‖²_W: at its minimum Dᵀ W (D − A u) (the quadratic's identity); where the
+    # conjugate gradients stopped short of it (their iteration limit: at 2 px of jitter a tone's solve stopped at
+    # a residual 15 × the tolerance) the identity errs to first order, by ± tens on a 1.6 s record (the blind
+    # tones' decisions compare such drops), and rᵀu takes it to the quadratic's value at the iterate
     wgt = np.where(valid, 1.0, 0.0) / spec.noise_std[:, None] ** 2 if rel is None else \
         np.where(valid, rel, 0.0) / spec.noise_std[:, None] ** 2
     objective = float(np.sum(wgt * np.where(valid, D * (D - pred), 0.0)))
+    if colour is None:  # with a colour the reported objective stays the white identity
+        objective -= out[6]
     if coefs is not None:  # the tones join the field, on the record and on the grid
-        wave = tone_waves(tones[0], m, dt, int(tones[2]) if len(tones) > 2 else 0, n_record=n) @ coefs
+        wave = tone_waves(tones[0], m, dt, int(tones[2]) if len(tones) > 2 else 0, n_record=n,
+                          chirps=tone_chirps(tones)) @ coefs
         full, grid = full + wave[:n], grid + wave
     theta = _finish(full, valid, taus, dt, max_gap_s)
     spec.above_ceiling = above
@@ -672,7 +703,8 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
         base -= best[0]
     if not chosen:
         return None
-    return chosen, sd, tone_order(solve, chosen, sd, order, base, max_order=max_order)
+    order = tone_order(solve, chosen, sd, order, base, max_order=max_order)
+    return tone_sweep(solve, chosen, sd, order, record_s, gain_needed=float(chi2.isf(false_alarm, 2)))
 
 
 def tone_order(solve, chosen: list, sd: float, order: int, objective: float, *, max_order: int) -> int:
@@ -699,6 +731,48 @@ def tone_order(solve, chosen: list, sd: float, order: int, objective: float, *, 
             break
         best, base = o, obj
     return best
+
+
+def tone_sweep(solve, freqs, sd: float, order: int, record_s: float, *, gain_needed: float,
+               rounds: int | None = None) -> tuple:
+    """The found tones with their frequency and sweep rate refined: ``(frequencies, sd, order[, chirps])``.
+
+    A CMG harmonic drifts over a record (0.3-1 % of 67 Hz: its second
+    harmonic sweeps 0.4-1.2 Hz in 1.6 s, one or two resolution bins), and
+    the search places its line on a grid of half bins. The polynomial
+    modulation follows a phase that turns by a cycle or so; beyond that the
+    restored line is off (an unseen CMG's 134.4-135.3 Hz sweep, found at
+    135.17 Hz, restored 0.020 px off in 125-145 Hz at degree 4; degree 6
+    follows it better but swings at the record's ends elsewhere).
+    Each tone in turn: the MAP objective at the eight neighbours of its
+    (frequency, rate) in steps of a quarter bin and of one bin swept over the
+    record (``1 / record_s²`` Hz/s), moving to the best while it drops by more
+    than ``gain_needed`` (−2 log of a likelihood ratio: χ² with the two
+    parameters), at most ``rounds`` times (default :data:`SWEEP_ROUNDS`). On that scene the objective chose
+    135.01 Hz sweeping 0.6 Hz/s: 0.013 px; a steady line (the same scene's
+    pitch) keeps its frequency and no sweep. ``chirps`` is given only when a
+    rate is not zero (``solve(tones)``: the MAP with those tones).
+    """
+    freqs, chirps = [float(f) for f in freqs], [0.0] * len(freqs)
+    objective = solve((freqs, sd, order)).objective
+    df, dc = 0.25 / record_s, 1.0 / record_s ** 2
+    for i in range(len(freqs)):
+        for _ in range(SWEEP_ROUNDS if rounds is None else int(rounds)):
+            best = None
+            for a in (-1, 0, 1):
+                for b in (-1, 0, 1):
+                    if a == b == 0:
+                        continue
+                    f2, c2 = list(freqs), list(chirps)
+                    f2[i] += a * df
+                    c2[i] += b * dc
+                    obj = solve((f2, sd, order, c2)).objective
+                    if best is None or obj < best[0]:
+                        best = (obj, f2, c2)
+            if objective - best[0] <= gain_needed:
+                break
+            objective, freqs, chirps = best
+    return (freqs, sd, order, chirps) if any(c != 0.0 for c in chirps) else (freqs, sd, order)
 
 
 def notch_peaks(D, valid, taus, dt: float, noise_std, centres, *, exclude_hz: float,
@@ -758,6 +832,8 @@ def notch_peaks(D, valid, taus, dt: float, noise_std, centres, *, exclude_hz: fl
 CONTROL_OFFSETS_BINS = (-6.0, -4.0, 4.0, 6.0)
 #: :func:`blind_tones`: the best candidates (by their drop) checked against their controls, in turn
 CANDIDATES_CHECKED = 3
+#: rounds of :func:`tone_sweep`'s refinement of a found tone's frequency and sweep rate
+SWEEP_ROUNDS = 4
 #: :func:`tone_order`: a step up in a found tone's modulation degree must lower the MAP objective by this much per
 #: added coefficient (2: Akaike's criterion)
 ORDER_PER_COEFFICIENT = 2.0

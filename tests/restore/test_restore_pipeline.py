@@ -355,6 +355,11 @@ def test_a_blind_frequency_tone_round_trips_through_the_file(tiny_restored, tmp_
     assert back.integration["pitch"].spectrum.tones == ([135.1351], 3.0e-6, 2)
     assert back.integration["roll"].spectrum.tones is None
     assert back.integration["pitch"].frozen_options()["tones"] == ([135.1351], 3.0e-6, 2)
+    # a swept tone keeps its rate
+    rec.spectrum.tones = ([135.1351], 3.0e-6, 4, [0.78])
+    restoration_dataset(res).to_netcdf(path)
+    back = result_from_dataset(xr.load_dataset(path), path)
+    assert back.integration["pitch"].spectrum.tones == ([135.1351], 3.0e-6, 4, [0.78])
 
 
 def test_every_restored_line_has_a_predicted_sigma_and_flagged_lines_are_not_restored(tiny_restored):
