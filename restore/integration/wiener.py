@@ -657,9 +657,17 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
         return None
     sd = 2.0 * math.sqrt(max(2.0 * float(np.sum(S)) * float(f[1] - f[0]), 1e-300))
 
+    solved: dict = {}
+
     def solve(tones):
-        return integrate_wiener(diffs, taus, dt, psd=psd, noise_std=noise_std, weights=weights, lags=lags,
-                                tones=tones, tol=tol, maxiter=maxiter, return_details=True)
+        # the degree's and the sweep's steps meet tones already solved (the chosen one, the stencil's overlap)
+        key = None if tones is None else (tuple(float(x) for x in tones[0]), float(tones[1]),
+                                          int(tones[2]) if len(tones) > 2 else 0,
+                                          None if tone_chirps(tones) is None else tuple(tone_chirps(tones)))
+        if key not in solved:
+            solved[key] = integrate_wiener(diffs, taus, dt, psd=psd, noise_std=noise_std, weights=weights,
+                                           lags=lags, tones=tones, tol=tol, maxiter=maxiter, return_details=True)
+        return solved[key]
 
     from scipy.stats import chi2
 
@@ -749,8 +757,8 @@ def tone_sweep(solve, freqs, sd: float, order: int, record_s: float, *, gain_nee
     record (``1 / record_s²`` Hz/s), moving to the best while it drops by more
     than ``gain_needed`` (−2 log of a likelihood ratio: χ² with the two
     parameters), at most ``rounds`` times (default :data:`SWEEP_ROUNDS`). On that scene the objective chose
-    135.01 Hz sweeping 0.6 Hz/s: 0.013 px; a steady line (the same scene's
-    pitch) keeps its frequency and no sweep. ``chirps`` is given only when a
+    135.01 Hz sweeping 0.39 Hz/s: the restored roll 0.027 -> 0.021 px; a steady
+    line (the same scene's pitch) keeps its frequency and no sweep. ``chirps`` is given only when a
     rate is not zero (``solve(tones)``: the MAP with those tones).
     """
     freqs, chirps = [float(f) for f in freqs], [0.0] * len(freqs)
