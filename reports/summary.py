@@ -141,6 +141,43 @@ def unobservable_line(run, axes) -> str:
     return "  without what no pair sees (record trend, yaw seen as roll or pitch, blind band): " + "; ".join(parts)
 
 
+def knowledge_check_line(restoration, axes) -> str | None:
+    """The line saying where the restored angle and its smoothed AOCS knowledge disagree beyond both predicted
+    errors (the ``knowledge_check`` of ``sigma_<axis>`` in restoration.nc, where its excess passed the limit),
+    or None.
+
+    The data cannot tell which prediction is short: σ takes the images' share of the excess
+    (``restoration.sigma_knowledge_check``); the line also gives σ as it would be if the images' prediction were
+    the short one, ``√(σ² − booked² + excess²)``, so that a reader without truth sees how optimistic σ may be.
+    """
+    import json
+
+    if restoration is None or "pixel_ifov_rad" not in restoration.attrs:
+        return None
+    ifov = float(restoration.attrs["pixel_ifov_rad"])
+    found = []
+    for a in axes:
+        v = restoration.variables.get(f"sigma_{a}")
+        try:
+            chk = json.loads(str(v.attrs.get("knowledge_check", "{}")) or "{}") if v is not None else {}
+        except ValueError:
+            continue
+        excess = float(chk.get("excess_rms_rad", 0.0) or 0.0)
+        sigma = float(v.attrs.get("predicted_detrended_rms_rad", np.nan)) if v is not None else np.nan
+        if not (excess > 0 and np.isfinite(sigma)):
+            continue
+        booked = float(chk.get("booked_rms_rad", 0.0) or 0.0)
+        lo, hi = chk["band_hz"]
+        worst = np.sqrt(max(sigma ** 2 - booked ** 2, 0.0) + excess ** 2)
+        found.append(f"{a} at {lo:.1f}–{hi:.1f} Hz {float(chk['ratio']):.2f} × (limit {float(chk['threshold']):.2f}): "
+                     f"σ {sigma / ifov:.4f} px takes {booked / ifov:.4f} px of the {excess / ifov:.4f} px excess, "
+                     f"{worst / ifov:.4f} px if the images' prediction is the short one")
+    if not found:
+        return None
+    return ("  the AOCS knowledge disagrees with the restored angle beyond both predicted errors (σ may be "
+            "optimistic): " + "; ".join(found))
+
+
 def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -> str:
     """A short text summary of a restored run.
 
@@ -202,6 +239,9 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
     tone = blind_tone_line(run.restoration, axes_r)
     if tone:
         lines.append(tone)
+    disagreement = knowledge_check_line(run.restoration, axes_r)
+    if disagreement:
+        lines.append(disagreement)
     verdict = hd.get("verdict") or ""
     if hd.get("passed") is True:
         lines.append(f"requirement: {verdict}")
