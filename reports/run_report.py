@@ -34,6 +34,7 @@ from reports import plotting as P
 from reports import report_data as D
 from reports import report_plots as RP
 from reports.frames_report import is_frames_run, make_frames_report
+from reports.summary import sigma_if_images_short
 from simsat.product import atomic_write_bytes, atomic_write_json
 from simsat.units import URAD_PER_RAD
 
@@ -454,15 +455,19 @@ def _budget_section(pg: _Page, run: D.RunData, integrate, max_integration_s: flo
     return bud
 
 
-def _knowledge_check_text(chk: dict, ifov: float) -> str:
-    """One cell: the band, observed / predicted power of restored − smoothed knowledge, and the excess beyond it."""
+def _knowledge_check_text(chk: dict, ifov: float, sigma_rad: float | None = None) -> str:
+    """One cell: the band, observed / predicted power of restored − smoothed knowledge, and the excess beyond it
+    (with ``sigma_rad``, the axis's predicted σ, also σ if the images' prediction is the short one)."""
     if not chk:
         return "—"
     lo, hi = chk["band_hz"]
     txt = f"{lo:.1f}–{hi:.1f} Hz: {chk['ratio']:.2f} × (limit {chk['threshold']:.2f})"
     booked = chk.get("booked_rms_rad", chk["excess_rms_rad"])
     if chk["excess_rms_rad"] > 0:
-        return txt + f"; excess {chk['excess_rms_rad'] / ifov:.4f} px, σ takes {booked / ifov:.4f} px of it"
+        txt += f"; excess {chk['excess_rms_rad'] / ifov:.4f} px, σ takes {booked / ifov:.4f} px of it"
+        if sigma_rad is not None and np.isfinite(sigma_rad):
+            txt += f" ({sigma_if_images_short(sigma_rad, chk) / ifov:.4f} px if the images' prediction is the short one)"
+        return txt
     # below the limit the two do not significantly disagree, but σ still takes its share of what was measured
     return txt + (f"; σ takes {booked / ifov:.4f} px of the excess" if booked > 0 else "")
 
@@ -479,7 +484,7 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
                      _fmt(d.get("ratio", np.nan), 3), _fmt(d.get("within_2sigma", np.nan) * 100, 3),
                      str(int(d["flagged"].sum())), _fmt(d["noise_scale"], 3),
                      _e(", ".join(f"{b} {v:.2f}" for b, v in d.get("band_shares", {}).items()) or "—"),
-                     _e(_knowledge_check_text(d.get("knowledge_check", {}), ifov))])
+                     _e(_knowledge_check_text(d.get("knowledge_check", {}), ifov, d["predicted_rms"]))])
     pg.table(["axis", "predicted RMS σ [px]", "actual RMS [px]", "actual / predicted", "lines within 2σ [%]",
               "flagged lines", "noise inflation", "band's share of its pairs' noise",
               "against the smoothed knowledge"], rows)
@@ -498,7 +503,8 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
             "knowledge's cut-off, the power of restored − smoothed knowledge over the sum of both predicted errors "
             "(images: the draws above; knowledge: the noise its smoothing leaves and its filter's error). Beyond "
             "the limit (two sampling spreads) one of the two predictions is short by at least the excess, and the "
-            "data cannot tell which; σ takes the images' share of it (restoration.sigma_knowledge_check).")
+            "data cannot tell which; σ takes the images' share of it (restoration.sigma_knowledge_check), and the "
+            "cell gives, in brackets, σ if the images' prediction is the short one.")
 
 
 def _matches_section(pg: _Page, run: D.RunData):

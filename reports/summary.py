@@ -141,6 +141,20 @@ def unobservable_line(run, axes) -> str:
     return "  without what no pair sees (record trend, yaw seen as roll or pitch, blind band): " + "; ".join(parts)
 
 
+def sigma_if_images_short(sigma_rad: float, check: dict) -> float:
+    """σ as it would be if the images' prediction were the short one: the share of the knowledge check's excess
+    it took (``booked_rms_rad``) replaced by all of it (``excess_rms_rad``), in quadrature [rad].
+
+    Examples
+    --------
+    >>> round(sigma_if_images_short(3.0, {"booked_rms_rad": 1.0, "excess_rms_rad": 2.0}) ** 2, 9)
+    12.0
+    """
+    booked = float(check.get("booked_rms_rad", 0.0) or 0.0)
+    excess = float(check.get("excess_rms_rad", 0.0) or 0.0)
+    return float(np.sqrt(max(sigma_rad ** 2 - booked ** 2, 0.0) + excess ** 2))
+
+
 def knowledge_check_line(restoration, axes) -> str | None:
     """The line saying where the restored angle and its smoothed AOCS knowledge disagree beyond both predicted
     errors (the ``knowledge_check`` of ``sigma_<axis>`` in restoration.nc, where its excess passed the limit),
@@ -168,7 +182,7 @@ def knowledge_check_line(restoration, axes) -> str | None:
             continue
         booked = float(chk.get("booked_rms_rad", 0.0) or 0.0)
         lo, hi = chk["band_hz"]
-        worst = np.sqrt(max(sigma ** 2 - booked ** 2, 0.0) + excess ** 2)
+        worst = sigma_if_images_short(sigma, chk)
         found.append(f"{a} at {lo:.1f}–{hi:.1f} Hz {float(chk['ratio']):.2f} × (limit {float(chk['threshold']):.2f}): "
                      f"σ {sigma / ifov:.4f} px takes {booked / ifov:.4f} px of the {excess / ifov:.4f} px excess, "
                      f"{worst / ifov:.4f} px if the images' prediction is the short one")

@@ -774,6 +774,12 @@ def test_knowledge_check_cell_says_what_sigma_takes_below_the_limit_too():
     below = _knowledge_check_text({**base, "ratio": 1.79, "excess_rms_rad": 0.0, "booked_rms_rad": 1.05e-8}, 1e-6)
     assert "excess 0" not in below and below.endswith("σ takes 0.0105 px of the excess")
     beyond = _knowledge_check_text({**base, "ratio": 2.5, "excess_rms_rad": 2e-8, "booked_rms_rad": 1e-8}, 1e-6)
-    assert "excess 0.0200 px, σ takes 0.0100 px of it" in beyond
+    assert "excess 0.0200 px, σ takes 0.0100 px of it" in beyond and "short one" not in beyond
+    # with the axis's σ (3e-8 rad): all of the excess instead of its share, √(9 − 1 + 4) × 0.01 px
+    with_sigma = _knowledge_check_text({**base, "ratio": 2.5, "excess_rms_rad": 2e-8, "booked_rms_rad": 1e-8}, 1e-6,
+                                       3e-8)
+    assert with_sigma.endswith(f"({np.sqrt(12) * 0.01:.4f} px if the images' prediction is the short one)")
+    assert "short one" not in _knowledge_check_text({**base, "ratio": 1.79, "excess_rms_rad": 0.0,
+                                                     "booked_rms_rad": 1.05e-8}, 1e-6, 3e-8)
     assert _knowledge_check_text({**base, "ratio": 0.5, "excess_rms_rad": 0.0, "booked_rms_rad": 0.0},
                                  1e-6) == "2.5–6.9 Hz: 0.50 × (limit 1.87)"
