@@ -34,7 +34,7 @@ from reports import plotting as P
 from reports import report_data as D
 from reports import report_plots as RP
 from reports.frames_report import is_frames_run, make_frames_report
-from reports.summary import sigma_if_images_short
+from reports.summary import sigma_if_images_short, sigma_took_check
 from simsat.product import atomic_write_bytes, atomic_write_json
 from simsat.units import URAD_PER_RAD
 
@@ -455,9 +455,10 @@ def _budget_section(pg: _Page, run: D.RunData, integrate, max_integration_s: flo
     return bud
 
 
-def _knowledge_check_text(chk: dict, ifov: float, sigma_rad: float | None = None) -> str:
+def _knowledge_check_text(chk: dict, ifov: float, sigma_rad: float | None = None, took_share: bool = True) -> str:
     """One cell: the band, observed / predicted power of restored − smoothed knowledge, and the excess beyond it
-    (with ``sigma_rad``, the axis's predicted σ, also σ if the images' prediction is the short one)."""
+    (with ``sigma_rad``, the axis's predicted σ, also σ if the images' prediction is the short one; ``took_share``:
+    whether σ holds its share of the excess, :func:`reports.summary.sigma_took_check`)."""
     if not chk:
         return "—"
     lo, hi = chk["band_hz"]
@@ -466,7 +467,8 @@ def _knowledge_check_text(chk: dict, ifov: float, sigma_rad: float | None = None
     if chk["excess_rms_rad"] > 0:
         txt += f"; excess {chk['excess_rms_rad'] / ifov:.4f} px, σ takes {booked / ifov:.4f} px of it"
         if sigma_rad is not None and np.isfinite(sigma_rad):
-            txt += f" ({sigma_if_images_short(sigma_rad, chk) / ifov:.4f} px if the images' prediction is the short one)"
+            worst = sigma_if_images_short(sigma_rad, chk, took_share=took_share)
+            txt += f" ({worst / ifov:.4f} px if the images' prediction is the short one)"
         return txt
     # below the limit the two do not significantly disagree, but σ still takes its share of what was measured
     return txt + (f"; σ takes {booked / ifov:.4f} px of the excess" if booked > 0 else "")
@@ -478,13 +480,14 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
         return
     pg.section("uncertainty", "Predicted uncertainty")
     ifov = sc["ifov_rad"]
+    took = sigma_took_check(run.restoration)
     rows = []
     for a, d in unc.items():
         rows.append([_e(a), _fmt(d["predicted_rms"] / ifov), _fmt(d.get("actual_rms", np.nan) / ifov),
                      _fmt(d.get("ratio", np.nan), 3), _fmt(d.get("within_2sigma", np.nan) * 100, 3),
                      str(int(d["flagged"].sum())), _fmt(d["noise_scale"], 3),
                      _e(", ".join(f"{b} {v:.2f}" for b, v in d.get("band_shares", {}).items()) or "—"),
-                     _e(_knowledge_check_text(d.get("knowledge_check", {}), ifov, d["predicted_rms"]))])
+                     _e(_knowledge_check_text(d.get("knowledge_check", {}), ifov, d["predicted_rms"], took))])
     pg.table(["axis", "predicted RMS σ [px]", "actual RMS [px]", "actual / predicted", "lines within 2σ [%]",
               "flagged lines", "noise inflation", "band's share of its pairs' noise",
               "against the smoothed knowledge"], rows)

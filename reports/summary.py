@@ -141,16 +141,31 @@ def unobservable_line(run, axes) -> str:
     return "  without what no pair sees (record trend, yaw seen as roll or pitch, blind band): " + "; ".join(parts)
 
 
-def sigma_if_images_short(sigma_rad: float, check: dict) -> float:
+def sigma_took_check(restoration) -> bool:
+    """Whether the restoration's σ took its share of the knowledge check's excess (``sigma_knowledge_check`` in
+    the settings restoration.nc records; on by default)."""
+    import json
+
+    try:
+        settings = json.loads(str(restoration.attrs.get("settings", "{}")) or "{}")
+    except ValueError:
+        settings = {}
+    return bool(settings.get("sigma_knowledge_check", True))
+
+
+def sigma_if_images_short(sigma_rad: float, check: dict, *, took_share: bool = True) -> float:
     """σ as it would be if the images' prediction were the short one: the share of the knowledge check's excess
-    it took (``booked_rms_rad``) replaced by all of it (``excess_rms_rad``), in quadrature [rad].
+    it took (``booked_rms_rad``; none when ``took_share`` is False) replaced by all of it (``excess_rms_rad``),
+    in quadrature [rad].
 
     Examples
     --------
     >>> round(sigma_if_images_short(3.0, {"booked_rms_rad": 1.0, "excess_rms_rad": 2.0}) ** 2, 9)
     12.0
+    >>> round(sigma_if_images_short(3.0, {"booked_rms_rad": 1.0, "excess_rms_rad": 2.0}, took_share=False) ** 2, 9)
+    13.0
     """
-    booked = float(check.get("booked_rms_rad", 0.0) or 0.0)
+    booked = float(check.get("booked_rms_rad", 0.0) or 0.0) if took_share else 0.0
     excess = float(check.get("excess_rms_rad", 0.0) or 0.0)
     return float(np.sqrt(max(sigma_rad ** 2 - booked ** 2, 0.0) + excess ** 2))
 
@@ -169,6 +184,7 @@ def knowledge_check_line(restoration, axes) -> str | None:
     if restoration is None or "pixel_ifov_rad" not in restoration.attrs:
         return None
     ifov = float(restoration.attrs["pixel_ifov_rad"])
+    took = sigma_took_check(restoration)
     found = []
     for a in axes:
         v = restoration.variables.get(f"sigma_{a}")
@@ -180,9 +196,9 @@ def knowledge_check_line(restoration, axes) -> str | None:
         sigma = float(v.attrs.get("predicted_detrended_rms_rad", np.nan)) if v is not None else np.nan
         if not (excess > 0 and np.isfinite(sigma)):
             continue
-        booked = float(chk.get("booked_rms_rad", 0.0) or 0.0)
+        booked = float(chk.get("booked_rms_rad", 0.0) or 0.0) if took else 0.0
         lo, hi = chk["band_hz"]
-        worst = sigma_if_images_short(sigma, chk)
+        worst = sigma_if_images_short(sigma, chk, took_share=took)
         found.append(f"{a} at {lo:.1f}–{hi:.1f} Hz {float(chk['ratio']):.2f} × (limit {float(chk['threshold']):.2f}): "
                      f"σ {sigma / ifov:.4f} px takes {booked / ifov:.4f} px of the {excess / ifov:.4f} px excess, "
                      f"{worst / ifov:.4f} px if the images' prediction is the short one")
