@@ -34,7 +34,7 @@ from reports import plotting as P
 from reports import report_data as D
 from reports import report_plots as RP
 from reports.frames_report import is_frames_run, make_frames_report
-from reports.summary import sigma_if_images_short, sigma_took_check
+from reports.summary import sigma_if_images_short
 from simsat.product import atomic_write_bytes, atomic_write_json
 from simsat.units import URAD_PER_RAD
 
@@ -458,7 +458,7 @@ def _budget_section(pg: _Page, run: D.RunData, integrate, max_integration_s: flo
 def _knowledge_check_text(chk: dict, ifov: float, sigma_rad: float | None = None, took_share: bool = True) -> str:
     """One cell: the band, observed / predicted power of restored − smoothed knowledge, and the excess beyond it
     (with ``sigma_rad``, the axis's predicted σ, also σ if the images' prediction is the short one; ``took_share``:
-    whether σ holds its share of the excess, :func:`reports.summary.sigma_took_check`)."""
+    whether σ holds its share of the excess: the setting ``sigma_knowledge_check``)."""
     if not chk:
         return "—"
     lo, hi = chk["band_hz"]
@@ -480,7 +480,7 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
         return
     pg.section("uncertainty", "Predicted uncertainty")
     ifov = sc["ifov_rad"]
-    took = sigma_took_check(run.restoration)
+    took = bool(run.settings.get("sigma_knowledge_check", True))
     rows = []
     for a, d in unc.items():
         rows.append([_e(a), _fmt(d["predicted_rms"] / ifov), _fmt(d.get("actual_rms", np.nan) / ifov),

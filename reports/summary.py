@@ -141,18 +141,6 @@ def unobservable_line(run, axes) -> str:
     return "  without what no pair sees (record trend, yaw seen as roll or pitch, blind band): " + "; ".join(parts)
 
 
-def sigma_took_check(restoration) -> bool:
-    """Whether the restoration's σ took its share of the knowledge check's excess (``sigma_knowledge_check`` in
-    the settings restoration.nc records; on by default)."""
-    import json
-
-    try:
-        settings = json.loads(str(restoration.attrs.get("settings", "{}")) or "{}")
-    except ValueError:
-        settings = {}
-    return bool(settings.get("sigma_knowledge_check", True))
-
-
 def sigma_if_images_short(sigma_rad: float, check: dict, *, took_share: bool = True) -> float:
     """σ as it would be if the images' prediction were the short one: the share of the knowledge check's excess
     it took (``booked_rms_rad``; none when ``took_share`` is False) replaced by all of it (``excess_rms_rad``),
@@ -170,7 +158,7 @@ def sigma_if_images_short(sigma_rad: float, check: dict, *, took_share: bool = T
     return float(np.sqrt(max(sigma_rad ** 2 - booked ** 2, 0.0) + excess ** 2))
 
 
-def knowledge_check_line(restoration, axes) -> str | None:
+def knowledge_check_line(restoration, axes, *, took_share: bool = True) -> str | None:
     """The line saying where the restored angle and its smoothed AOCS knowledge disagree beyond both predicted
     errors (the ``knowledge_check`` of ``sigma_<axis>`` in restoration.nc, where its excess passed the limit),
     or None.
@@ -178,13 +166,14 @@ def knowledge_check_line(restoration, axes) -> str | None:
     The data cannot tell which prediction is short: σ takes the images' share of the excess
     (``restoration.sigma_knowledge_check``); the line also gives σ as it would be if the images' prediction were
     the short one, ``√(σ² − booked² + excess²)``, so that a reader without truth sees how optimistic σ may be.
+    ``took_share``: whether σ holds that share (the setting ``sigma_knowledge_check``, on by default).
     """
     import json
 
     if restoration is None or "pixel_ifov_rad" not in restoration.attrs:
         return None
     ifov = float(restoration.attrs["pixel_ifov_rad"])
-    took = sigma_took_check(restoration)
+    took = bool(took_share)
     found = []
     for a in axes:
         v = restoration.variables.get(f"sigma_{a}")
@@ -269,7 +258,8 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
     tone = blind_tone_line(run.restoration, axes_r)
     if tone:
         lines.append(tone)
-    disagreement = knowledge_check_line(run.restoration, axes_r)
+    disagreement = knowledge_check_line(run.restoration, axes_r,
+                                        took_share=bool(run.settings.get("sigma_knowledge_check", True)))
     if disagreement:
         lines.append(disagreement)
     verdict = hd.get("verdict") or ""

@@ -11,17 +11,14 @@ from reports.summary import knowledge_check_line
 IFOV = 1e-6
 
 
-def _ds(checks: dict, sigma_rad: float = 3e-8, ifov: float | None = IFOV, took: bool | None = None):
+def _ds(checks: dict, sigma_rad: float = 3e-8, ifov: float | None = IFOV):
     data = {}
     for a in ("roll", "pitch"):
         attrs = {"units": "rad", "predicted_detrended_rms_rad": sigma_rad}
         if a in checks:
             attrs["knowledge_check"] = json.dumps(checks[a])
         data[f"sigma_{a}"] = ("line", np.full(4, sigma_rad), attrs)
-    attrs = {} if ifov is None else {"pixel_ifov_rad": ifov}
-    if took is not None:
-        attrs["settings"] = json.dumps({"sigma_knowledge_check": took})
-    return xr.Dataset(data, attrs=attrs)
+    return xr.Dataset(data, attrs={} if ifov is None else {"pixel_ifov_rad": ifov})
 
 
 def _check(excess: float, booked: float, ratio: float = 2.5) -> dict:
@@ -59,9 +56,9 @@ def test_both_axes_are_listed_in_order():
 def test_with_the_check_off_sigma_holds_none_of_the_excess():
     """``sigma_knowledge_check = false``: σ took nothing (the check still records its share), so all of the excess
     adds to σ as it is: √(9 + 4) e-8 rad."""
-    line = knowledge_check_line(_ds({"pitch": _check(2e-8, 1e-8)}, took=False), ["pitch"])
+    line = knowledge_check_line(_ds({"pitch": _check(2e-8, 1e-8)}), ["pitch"], took_share=False)
     assert "σ 0.0300 px takes 0.0000 px of the 0.0200 px excess" in line
     worst = float(line.split("excess, ")[1].split(" px")[0])
     assert worst == pytest.approx(np.sqrt(9 + 4) * 1e-2, abs=5e-5)
-    on = knowledge_check_line(_ds({"pitch": _check(2e-8, 1e-8)}, took=True), ["pitch"])
+    on = knowledge_check_line(_ds({"pitch": _check(2e-8, 1e-8)}), ["pitch"], took_share=True)
     assert float(on.split("excess, ")[1].split(" px")[0]) == pytest.approx(np.sqrt(12) * 1e-2, abs=5e-5)
