@@ -475,9 +475,10 @@ def test_posterior_samples_zero_writes_no_sigma_and_one_is_refused(tiny_restored
     assert res.sigma == {} and "sigma_roll" not in xr.load_dataset(run / "restoration.nc")
 
 
-def test_recorded_lags_are_the_inliers_line_residuals_and_were_integrated_with(tiny_restored):
-    """Time synchronisation: the lag of each line is the mean line residual of its inliers (computed here
-    from the recorded matches), and the correction is the integration *with* those lags (its exposure undone,
+def test_recorded_lags_are_the_inliers_line_offsets_less_the_delay_and_were_integrated_with(tiny_restored):
+    """Time synchronisation: the lag of each line is the mean matched line offset of its inliers less the pair's
+    delay τ′ (computed here from the recorded matches; not the residual about the knowledge's prediction, which
+    moves with the knowledge's own noise), and the correction is the integration *with* those lags (its exposure undone,
     the knowledge's smoothed low band added): integrating the same differentials without them gives a clearly
     different correction."""
     from restore import stages
@@ -492,7 +493,7 @@ def test_recorded_lags_are_the_inliers_line_residuals_and_were_integrated_with(t
     for j, p in enumerate(res.pairs):
         lag_lines = res.integration["pitch"].lags_s[j] / te
         li = np.rint(p.line_a).astype(int)
-        r = p.meas_line_b - p.pred_line_b
+        r = p.meas_line_b - p.line_a - p.tau_s / te
         checked = 0
         for line in range(0, n, 7):
             m = p.inlier & (li == line) & np.isfinite(r)
