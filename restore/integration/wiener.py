@@ -609,11 +609,18 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     χ² with the tone's coefficients: where the field already explains the
     data — a tone off the blind frequency, broadband power in the notch — a
     tone gains little);
-    then the next, with the kept ones in the model, at most one per notch and
-    ``max_tones`` in all (default: one per notch; an unseen CMG with lines in
-    the notches at 135 and 270 Hz kept 0.19 px of the other with one tone in
-    all; on the off-nadir stress scenario a second tone for a CMG line
-    drifting across the notch gained nothing on roll and cost pitch 0.008 px).
+    then the next, with the kept ones in the model, at most one per slot and
+    ``max_tones`` in all (default: one per slot). A notch has two slots: its
+    blind frequency (the candidates within a bin of it, seen through the lags
+    only) and the line the pairs see directly inside it (the
+    :func:`notch_peaks` candidate, 1.5 bins or more away), which may both be
+    there: on an unseen CMG scene a harmonic at 129.6 Hz took the 135.1 Hz
+    notch's only tone and a 0.5 px line on 135.135 Hz stayed whole in the
+    error (0.36 px RMS; 0.025 / 0.041 px with a slot each). Never two tones
+    of one kind in a notch: an unseen CMG with lines in the notches at 135
+    and 270 Hz kept 0.19 px of the other with one tone in all, but on the
+    off-nadir stress scenario a second tone for a CMG line drifting across
+    the notch gained nothing on roll and cost pitch 0.008 px.
     The tone's cos and sin each carry a polynomial of degree ``order`` in
     time (a line whose amplitude and phase drift over the record, as a CMG
     harmonic's do: on that scenario the roll error 0.050 → 0.029 px with
@@ -672,24 +679,31 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     from scipy.stats import chi2
 
     offsets = (-1.0, -0.5, 0.0, 0.5, 1.0)
-    # (frequency, the notch it belongs to): at most one tone per notch
-    candidates = [(fc + k / record_s, i) for i, fc in enumerate(centres) for k in offsets]
+    # (frequency, its slot): at most one tone per slot — in each notch, one on the blind frequency (seen through
+    # the lags only) and one on a line the pairs see directly inside the notch (:func:`notch_peaks`)
+    candidates = [(fc + k / record_s, (i, "blind")) for i, fc in enumerate(centres) for k in offsets]
     if base_objective is None or base_prediction is None:
         first = solve(None)
         base_objective, base_prediction = first.objective, first.predicted
     left = np.where(valid, D - np.nan_to_num(np.asarray(base_prediction, dtype=np.float64)), 0.0)
-    candidates += [(fk, i) for i, fk in notch_peaks(left, valid, taus_a, dt, noise_std, centres,
-                                                    exclude_hz=1.5 / record_s, false_alarm=false_alarm)]
+    peaks = [(fk, (i, "line")) for i, fk in notch_peaks(left, valid, taus_a, dt, noise_std, centres,
+                                                         exclude_hz=1.5 / record_s, false_alarm=false_alarm)]
+    candidates += peaks
     # the objective's drop is −2 log of a likelihood ratio: χ² with the tone's 2(order + 1) coefficients
     # under no tone, over every candidate tried (Bonferroni)
     threshold = float(chi2.isf(false_alarm / len(candidates), 2 * (order + 1)))
     chosen: list = []
+    chosen_slots: list = []
     used: set = set()
     base = float(base_objective)
-    for _ in range(centres.size if max_tones is None else min(int(max_tones), centres.size)):
+    slots = len({i for _, i in candidates})
+    # a notch's second tone stands apart from its first by the width a drifting line spans: closer, the two
+    # would be one line drifting across the notch
+    apart = TONE_SEPARATION_BINS / record_s
+    for _ in range(slots if max_tones is None else min(int(max_tones), slots)):
         gains = []
         for fk, i in candidates:
-            if i in used:
+            if i in used or any(j[0] == i[0] and abs(fk - fc) < apart for fc, j in zip(chosen, chosen_slots)):
                 continue
             gains.append((base - solve((chosen + [fk], sd, order)).objective, fk, i))
         best = None
@@ -707,6 +721,7 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
         if best is None:
             break
         chosen.append(best[1])
+        chosen_slots.append(best[2])
         used.add(best[2])
         base -= best[0]
     if not chosen:
@@ -838,6 +853,9 @@ def notch_peaks(D, valid, taus, dt: float, noise_std, centres, *, exclude_hz: fl
 #: :func:`blind_tones`: the control tones' offsets from a candidate [resolution bins] (beyond the candidates' ± 1
 #: and the width a second-order drift gives a line)
 CONTROL_OFFSETS_BINS = (-6.0, -4.0, 4.0, 6.0)
+#: :func:`blind_tones`: a notch's two tones (its blind frequency's, a line the pairs see inside it) lie at least this
+#: far apart [resolution bins] — the controls' nearest offset, the width a second-order drift gives a line
+TONE_SEPARATION_BINS = 4.0
 #: :func:`blind_tones`: the best candidates (by their drop) checked against their controls, in turn
 CANDIDATES_CHECKED = 3
 #: rounds of :func:`tone_sweep`'s refinement of a found tone's frequency and sweep rate
