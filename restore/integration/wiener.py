@@ -616,7 +616,7 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     :func:`notch_peaks` candidate, 1.5 bins or more away), which may both be
     there: on an unseen CMG scene a harmonic at 129.6 Hz took the 135.1 Hz
     notch's only tone and a 0.5 px line on 135.135 Hz stayed whole in the
-    error (0.36 px RMS; 0.025 / 0.041 px with a slot each). Never two tones
+    error (0.36 px RMS; 0.017 / 0.028 px with a slot each). Never two tones
     of one kind in a notch: an unseen CMG with lines in the notches at 135
     and 270 Hz kept 0.19 px of the other with one tone in all, but on the
     off-nadir stress scenario a second tone for a CMG line drifting across
@@ -686,15 +686,13 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
         first = solve(None)
         base_objective, base_prediction = first.objective, first.predicted
     left = np.where(valid, D - np.nan_to_num(np.asarray(base_prediction, dtype=np.float64)), 0.0)
-    peaks = [(fk, (i, "line")) for i, fk in notch_peaks(left, valid, taus_a, dt, noise_std, centres,
-                                                         exclude_hz=1.5 / record_s, false_alarm=false_alarm)]
-    candidates += peaks
+    candidates += [(fk, (i, "line")) for i, fk in notch_peaks(left, valid, taus_a, dt, noise_std, centres,
+                                                               exclude_hz=1.5 / record_s, false_alarm=false_alarm)]
     # the objective's drop is −2 log of a likelihood ratio: χ² with the tone's 2(order + 1) coefficients
     # under no tone, over every candidate tried (Bonferroni)
     threshold = float(chi2.isf(false_alarm / len(candidates), 2 * (order + 1)))
     chosen: list = []
     chosen_slots: list = []
-    used: set = set()
     base = float(base_objective)
     slots = len({i for _, i in candidates})
     # a notch's second tone stands apart from its first by the width a drifting line spans: closer, the two
@@ -703,7 +701,7 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
     for _ in range(slots if max_tones is None else min(int(max_tones), slots)):
         gains = []
         for fk, i in candidates:
-            if i in used or any(j[0] == i[0] and abs(fk - fc) < apart for fc, j in zip(chosen, chosen_slots)):
+            if i in chosen_slots or any(j[0] == i[0] and abs(fk - fc) < apart for fc, j in zip(chosen, chosen_slots)):
                 continue
             gains.append((base - solve((chosen + [fk], sd, order)).objective, fk, i))
         best = None
@@ -722,7 +720,6 @@ def blind_tones(diffs, taus, dt, *, psd, noise_std, weights=None, lags, tol: flo
             break
         chosen.append(best[1])
         chosen_slots.append(best[2])
-        used.add(best[2])
         base -= best[0]
     if not chosen:
         return None
