@@ -508,6 +508,16 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
             "the limit (two sampling spreads) one of the two predictions is short by at least the excess, and the "
             "data cannot tell which; σ takes the images' share of it (restoration.sigma_knowledge_check), and the "
             "cell gives, in brackets, σ if the images' prediction is the short one.")
+    from .summary import _scene_offset_line_of
+
+    offset = _scene_offset_line_of(run, list(unc))
+    if offset:
+        pg.note(offset.strip()[0].upper() + offset.strip()[1:] + ": each band is a different blend of the scene's "
+                "sunlit and shaded features, offset towards the sun by amounts that follow the scene's large "
+                "features, and where the pairs see the attitude through about 2π f τ such an offset is an "
+                "attitude to every pair (restore.observability.scene_offset_band). Its size depends on the "
+                "scene, not on the product; an AOCS knowledge whose band reaches the top of this one would hold "
+                "it.")
 
 
 def _matches_section(pg: _Page, run: D.RunData):

@@ -141,6 +141,39 @@ def unobservable_line(run, axes) -> str:
     return "  without what no pair sees (record trend, yaw seen as roll or pitch, blind band): " + "; ".join(parts)
 
 
+def scene_offset_line(product_attrs, taus, axes, ephemeris=None) -> str | None:
+    """The line saying where the images alone restore the attitude and the scene's band offset passes as one.
+
+    ``product_attrs``: product.nc's attributes (the knowledge's cut-off, the sun's azimuth, the acquisition);
+    ``taus``: the delays of the pairs the restoration used [s]; ``ephemeris``: the platform positions (lines,
+    3) [m], whose direction gives the track's azimuth (+x when absent). None when the knowledge reaches the top
+    of the band (:func:`restore.observability.scene_offset_band`), the product does not record the sun or the
+    knowledge, or it is not a push-broom acquisition.
+    """
+    from restore.observability import scene_offset_band, sun_offset_shares
+
+    at = dict(product_attrs or {})
+    if at.get("acquisition", "pushbroom") != "pushbroom" or "sun_azimuth_deg" not in at:
+        return None
+    band = scene_offset_band(taus, at.get("knowledge_cutoff_hz"))
+    if band is None:
+        return None
+    track = 0.0
+    if ephemeris is not None:
+        e = np.asarray(ephemeris, dtype=np.float64)
+        if e.ndim == 2 and e.shape[0] > 1 and np.all(np.isfinite(e[[0, -1], :2])):
+            v = e[-1, :2] - e[0, :2]
+            track = float(np.degrees(np.arctan2(v[1], v[0]))) if np.hypot(*v) > 0 else 0.0
+    shares = sun_offset_shares(float(at["sun_azimuth_deg"]), track)
+    named = [f"{shares[a] * 100:.0f} % on {a}" for a in ("pitch", "roll") if a in axes]
+    if not named:
+        return None
+    rel = (float(at["sun_azimuth_deg"]) - track + 180.0) % 360.0 - 180.0
+    return (f"  images alone at {band[0]:.1f}–{band[1]:.1f} Hz (above the AOCS knowledge's cut-off): there the "
+            f"scene's band-to-band offset towards the sun ({rel:.0f}° from the track: {', '.join(named)}) moves the "
+            f"bands as an attitude would, and σ does not hold it")
+
+
 def sigma_if_images_short(sigma_rad: float, check: dict, *, took_share: bool = True) -> float:
     """σ as it would be if the images' prediction were the short one: the share of the knowledge check's excess
     it took (``booked_rms_rad``; none when ``took_share`` is False) replaced by all of it (``excess_rms_rad``),
@@ -195,6 +228,19 @@ def knowledge_check_line(restoration, axes, *, took_share: bool = True) -> str |
         return None
     return ("  the AOCS knowledge disagrees with the restored angle beyond both predicted errors (σ may be "
             "optimistic): " + "; ".join(found))
+
+
+def _scene_offset_line_of(run, axes) -> str | None:
+    """:func:`scene_offset_line` of a loaded run (None without a restoration)."""
+    if run.restoration is None:
+        return None
+    from restore.restoration_io import result_from_dataset
+
+    res = result_from_dataset(run.restoration)
+    taus = [float(p.tau_s) for p in (res.pairs or [])]
+    ds = getattr(run.product, "ds", None)
+    eph = ds["ephemeris"].values if ds is not None and "ephemeris" in ds else None
+    return scene_offset_line(ds.attrs if ds is not None else {}, taus, axes, eph)
 
 
 def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -> str:
@@ -258,6 +304,9 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
     tone = blind_tone_line(run.restoration, axes_r)
     if tone:
         lines.append(tone)
+    offset = _scene_offset_line_of(run, axes_r)
+    if offset:
+        lines.append(offset)
     disagreement = knowledge_check_line(run.restoration, axes_r,
                                         took_share=bool(run.settings.get("sigma_knowledge_check", True)))
     if disagreement:

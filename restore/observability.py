@@ -38,6 +38,18 @@ out of a measured error):
   track by θ₀ the line looks ahead and a yaw sweeps it across track: the same with
   roll, ``c ≈ sin θ₀`` (:func:`restore.stages.yaw_coupling`).
 
+And one more, which depends on the scene, so that no figure of the product
+gives its size (:func:`scene_offset_band`):
+
+* **the scene's band-to-band offset** — each band is a different blend of
+  the scene's sunlit and shaded features (crowns, shadows filled by a bluish
+  sky), so the bands are offset towards the sun by amounts that follow the
+  scene's large features; where the pairs see the attitude through about
+  ``2π f τ`` (below about ``1 / (2π τ_max)``) an offset proportional to a
+  band's place on the focal plane is an attitude's differential. Where the
+  AOCS knowledge stops below that band, the images alone restore it and the
+  offset passes into the restored axis along the sun (:func:`sun_offset_shares`).
+
 The prior is what the restoration estimated from the differentials (the
 Wiener method reports it); near common blind frequencies it is an
 extrapolation by construction, which these figures inherit.
@@ -50,7 +62,8 @@ import numpy as np
 
 from .integration.transfer import fused_snr
 
-__all__ = ["Observability", "fused_snr", "observability", "record_observability", "band_power", "record_trend"]
+__all__ = ["Observability", "fused_snr", "observability", "record_observability", "band_power", "record_trend",
+           "scene_offset_band", "sun_offset_shares", "offset_misfit", "OFFSET_MISFIT"]
 
 
 @dataclass
@@ -124,3 +137,82 @@ def record_trend(series) -> np.ndarray:
         return np.where(ok, np.mean(y[ok]) if ok.any() else np.nan, np.nan)
     coef = np.polyfit(x[ok], y[ok], 1)
     return np.where(ok, np.polyval(coef, x), np.nan)
+
+
+#: the part of a band offset proportional to the bands' places that the attitude's signature leaves unexplained,
+#: in amplitude, up to the top of :func:`scene_offset_band` (0.1: the attitude holds 99 % of its power)
+OFFSET_MISFIT = 0.1
+
+
+def offset_misfit(taus, freq) -> np.ndarray:
+    """Part of a band offset proportional to the bands' places that no attitude at ``freq`` explains.
+
+    Bands at along-track places ``x_k`` (delays ``τ_AB = (x_A − x_B) / v``) offset by ``c x_k`` give pair AB the
+    differential ``c v τ_AB``; an attitude ``θ`` at ``f`` gives ``(e^{2πifτ_AB} − 1) θ``. Returns, per
+    frequency, the norm of the offset's least-squares residual on that signature over its own norm (0: the
+    offset is exactly an attitude to every pair; 1: orthogonal to it).
+    """
+    t = np.asarray(taus, dtype=np.float64).ravel()
+    f = np.atleast_1d(np.asarray(freq, dtype=np.float64))
+    g = np.exp(2j * np.pi * np.outer(f, t)) - 1.0                     # (freq, pairs)
+    gg = np.sum(np.abs(g) ** 2, axis=1)
+    proj = np.where(gg > 0, np.abs(g.conj() @ t) ** 2 / np.where(gg > 0, gg, 1.0), 0.0)
+    return np.sqrt(np.maximum(1.0 - proj / np.dot(t, t), 0.0))
+
+
+def scene_offset_band(taus, knowledge_cutoff_hz) -> tuple[float, float] | None:
+    """The band [Hz] where the images alone restore the attitude and the scene's band offset looks like one.
+
+    Up to the highest frequency where :func:`offset_misfit` stays within :data:`OFFSET_MISFIT` (about
+    ``1 / (2π τ_max)``), an offset between the bands proportional to their place on the focal plane gives the
+    pairs an attitude's differentials (99 % of its power), and neither a residual nor any method tells the two
+    apart (the module's notes). The AOCS knowledge holds the attitude up to its cut-off (gain ½ there); above
+    it, up to that top, the images are alone.
+
+    Parameters
+    ----------
+    taus : sequence of float
+        The pairs' delays [s].
+    knowledge_cutoff_hz : float or None
+        The AOCS knowledge's cut-off (product.nc's ``knowledge_cutoff_hz``); None: unknown.
+
+    Returns
+    -------
+    (low, high) or None
+        ``(cut-off, top)``; None when the knowledge reaches the top, or the cut-off or the delays are unknown.
+
+    Examples
+    --------
+    >>> lo, hi = scene_offset_band([0.0074, 0.0222, 0.0148], 2.0)
+    >>> lo, round(hi, 1)
+    (2.0, 6.8)
+    >>> scene_offset_band([0.0074, 0.0222, 0.0148], 10.0) is None
+    True
+    """
+    t = np.abs(np.asarray(taus, dtype=np.float64)).ravel()
+    t = t[np.isfinite(t) & (t > 0)]
+    if knowledge_cutoff_hz is None or not np.isfinite(knowledge_cutoff_hz) or knowledge_cutoff_hz <= 0 or not t.size:
+        return None
+    f = np.linspace(0.0, 1.0 / (2.0 * float(t.max())), 2049)[1:]
+    over = offset_misfit(t, f) > OFFSET_MISFIT
+    high = float(f[max(int(np.argmax(over)) - 1, 0)] if over.any() else f[-1])   # the last within the misfit
+    lo = float(knowledge_cutoff_hz)
+    return (lo, high) if lo < high else None
+
+
+def sun_offset_shares(sun_azimuth_deg: float, track_azimuth_deg: float = 0.0) -> dict:
+    """How a band offset along the sun's horizontal direction splits between pitch and roll (power shares).
+
+    Pitch moves the image along the track, roll across it: an offset at ``Δ`` from the track (the sun's
+    azimuth less the track's, both from the local +x towards +y) puts ``cos² Δ`` of its power on pitch and
+    ``sin² Δ`` on roll.
+
+    Examples
+    --------
+    >>> {k: round(v, 2) for k, v in sun_offset_shares(150.0).items()}
+    {'roll': 0.25, 'pitch': 0.75}
+    >>> {k: round(v, 2) for k, v in sun_offset_shares(100.0, 10.0).items()}
+    {'roll': 1.0, 'pitch': 0.0}
+    """
+    d = np.radians(float(sun_azimuth_deg) - float(track_azimuth_deg))
+    return {"roll": float(np.sin(d) ** 2), "pitch": float(np.cos(d) ** 2)}

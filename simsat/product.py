@@ -282,6 +282,8 @@ def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowled
     which frequencies the images must supply. ``star_tracker_spec`` (its noise
     and rate) likewise in ``star_tracker_noise_urad``, ``star_tracker_rate_hz``
     when the product carries star-tracker samples: the anchoring's uncertainty.
+    The sun's elevation and azimuth (``sun_elevation_deg``, ``sun_azimuth_deg``,
+    from the local +x towards +y) as a ground segment knows them.
 
     ``images``: band → (line, column) DN, or None (streamed in afterwards by
     the renderer); ``kn``/``st``: knowledge and star-tracker attitude series;
@@ -355,8 +357,17 @@ def product_dataset(sc, images: dict | None, t_lines, kn, st, known_dem, knowled
            {"star_tracker_noise_urad": float(star_tracker_spec.noise_urad),
             "star_tracker_rate_hz": float(star_tracker_spec.rate_hz)}),
         "attitude_convention": "body->local R = Rz(yaw) Ry(pitch) Rx(roll); roll moves image across-track",
+        # the sun over the scene, as a ground segment knows it from the date and place: the scene's band offset
+        # lies along its azimuth (restore.observability.sun_offset_shares)
+        **_sun_attrs(sc),
     }
     return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def _sun_attrs(sc) -> dict:
+    """``sun_elevation_deg`` and ``sun_azimuth_deg`` (from the local +x, along the track, towards +y)."""
+    sun = sc.sun()
+    return {"sun_elevation_deg": float(sun.elevation_deg), "sun_azimuth_deg": float(sun.azimuth_deg)}
 
 
 def check_image(img: np.ndarray, where: str) -> None:

@@ -49,3 +49,44 @@ def test_below_the_highpass_nothing_is_counted():
     obs = observability(f, s, 0.02e-6, TAUS, DT, highpass_hz=2.0)
     assert obs.unobservable_rms_rad == 0.0 and obs.floor_rms_rad == 0.0
     assert band_power(f, s, np.ones(f.size, bool)) == pytest.approx(0.5e-12, rel=1e-12)
+
+
+def test_below_the_scene_offset_band_s_top_a_band_offset_is_an_attitude_to_every_pair():
+    # Bands at along-track places x_k (delays τ_AB = (x_A − x_B) / v): an offset c x_k between the bands gives
+    # pair AB the differential c v τ_AB, an attitude θ at f gives (e^{2πifτ_AB} − 1) θ. Fitted by the attitude
+    # (least squares, written out here), the offset leaves at most OFFSET_MISFIT of itself up to the band's
+    # top, and more above it; the top sits near 1 / (2π τ_max).
+    from restore.observability import OFFSET_MISFIT, offset_misfit, scene_offset_band
+
+    taus = np.array([0.0074, 0.0222, 0.0148])
+    lo, hi = scene_offset_band(taus, 2.0)
+    assert lo == 2.0 and 0.8 < hi * 2 * np.pi * taus.max() < 1.2
+    offset = taus.astype(complex)                    # c v τ_AB, any scale
+
+    def misfit(f):
+        g = np.exp(2j * np.pi * f * taus) - 1
+        theta = np.vdot(g, offset) / np.vdot(g, g)
+        return np.linalg.norm(offset - theta * g) / np.linalg.norm(offset)
+
+    fs = np.linspace(0.05, hi, 25)
+    assert np.allclose(offset_misfit(taus, fs), [misfit(f) for f in fs])
+    assert all(misfit(f) <= OFFSET_MISFIT + 1e-9 for f in fs)
+    assert misfit(1.05 * hi) > OFFSET_MISFIT and misfit(3 * hi) > 3 * OFFSET_MISFIT
+    # one pair: any offset is an attitude at every frequency below its first blind one
+    assert np.allclose(offset_misfit([0.01], [1.0, 30.0, 70.0]), 0.0)
+    # the knowledge reaches the top: nothing is left to the images alone; unknown cut-off or delays: no band
+    assert scene_offset_band(taus, 10.0) is None
+    assert scene_offset_band(taus, None) is None and scene_offset_band([], 2.0) is None
+
+
+def test_a_band_offset_towards_the_sun_splits_between_pitch_and_roll_by_its_azimuth_from_the_track():
+    from restore.observability import sun_offset_shares
+
+    assert sun_offset_shares(0.0) == pytest.approx({"roll": 0.0, "pitch": 1.0})
+    assert sun_offset_shares(90.0) == pytest.approx({"roll": 1.0, "pitch": 0.0}, abs=1e-12)
+    for az, track in [(150.0, 0.0), (37.0, 12.0), (200.0, -20.0)]:
+        s = sun_offset_shares(az, track)
+        assert s["roll"] + s["pitch"] == pytest.approx(1.0)
+        assert s["pitch"] == pytest.approx(np.cos(np.radians(az - track)) ** 2)
+    # the sun behind or ahead is the same line of offset
+    assert sun_offset_shares(30.0) == pytest.approx(sun_offset_shares(210.0))

@@ -47,6 +47,17 @@ def test_product_records_what_the_aocs_knowledge_covers(tiny_run):
     assert attrs["knowledge_noise_urad"] == spec.noise_urad
 
 
+def test_product_records_the_sun_as_a_ground_segment_knows_it(tiny_run):
+    """The sun's elevation and azimuth (from the track towards +y) are in product.nc: the scene's band offset
+    lies along its azimuth (reports.summary.scene_offset_line)."""
+    from simsat.scenario import load_scenario
+
+    attrs = xr.load_dataset(tiny_run / "product.nc").attrs
+    sun = load_scenario("tiny").sun()
+    assert attrs["sun_elevation_deg"] == sun.elevation_deg
+    assert attrs["sun_azimuth_deg"] == sun.azimuth_deg
+
+
 def test_product_records_the_detector_radiometry(tiny_run):
     """A ground segment knows its detector's calibration (gain, read noise): restore's noise model reads it;
     an older product without it reads as unknown (None)."""
