@@ -508,9 +508,9 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
             "the limit (two sampling spreads) one of the two predictions is short by at least the excess, and the "
             "data cannot tell which; σ takes the images' share of it (restoration.sigma_knowledge_check), and the "
             "cell gives, in brackets, σ if the images' prediction is the short one.")
-    from .summary import _scene_offset_line_of
+    from .summary import scene_offset_line_of_run
 
-    offset = _scene_offset_line_of(run, list(unc))
+    offset = scene_offset_line_of_run(run, list(unc))
     if offset:
         pg.note(offset.strip()[0].upper() + offset.strip()[1:] + ": each band is a different blend of the scene's "
                 "sunlit and shaded features, offset towards the sun by amounts that follow the scene's large "

@@ -230,7 +230,7 @@ def knowledge_check_line(restoration, axes, *, took_share: bool = True) -> str |
             "optimistic): " + "; ".join(found))
 
 
-def _scene_offset_line_of(run, axes) -> str | None:
+def scene_offset_line_of_run(run, axes) -> str | None:
     """:func:`scene_offset_line` of a loaded run (None without a restoration)."""
     if run.restoration is None:
         return None
@@ -304,7 +304,7 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
     tone = blind_tone_line(run.restoration, axes_r)
     if tone:
         lines.append(tone)
-    offset = _scene_offset_line_of(run, axes_r)
+    offset = scene_offset_line_of_run(run, axes_r)
     if offset:
         lines.append(offset)
     disagreement = knowledge_check_line(run.restoration, axes_r,

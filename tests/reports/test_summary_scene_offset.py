@@ -39,3 +39,12 @@ def test_only_the_restored_axes_are_named():
     line = scene_offset_line(_attrs(), TAUS, ["roll"])
     assert "on roll" in line and "pitch" not in line
     assert scene_offset_line(_attrs(), TAUS, ["yaw"]) is None
+
+
+def test_a_run_without_a_restoration_has_no_line():
+    from reports.summary import scene_offset_line_of_run
+
+    class _Run:
+        restoration = None
+
+    assert scene_offset_line_of_run(_Run(), ["roll", "pitch"]) is None
