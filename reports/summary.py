@@ -234,10 +234,8 @@ def scene_offset_line_of_run(run, axes) -> str | None:
     """:func:`scene_offset_line` of a loaded run (None without a restoration)."""
     if run.restoration is None:
         return None
-    from restore.restoration_io import result_from_dataset
-
-    res = result_from_dataset(run.restoration)
-    taus = [float(p.tau_s) for p in (res.pairs or [])]
+    # the pairs' delays as restoration.nc records them (no need to rebuild the whole result for them)
+    taus = run.restoration["tau_s"].values if "tau_s" in run.restoration else []
     ds = getattr(run.product, "ds", None)
     eph = ds["ephemeris"].values if ds is not None and "ephemeris" in ds else None
     return scene_offset_line(ds.attrs if ds is not None else {}, taus, axes, eph)
