@@ -80,8 +80,10 @@ def line_ranges(missing) -> list[tuple[int, int]]:
 
 
 def coverage_line(restoration, axes) -> str:
-    """When fewer than 95 % of the lines are restored: how many, the longest unrestored line ranges, and
-    why (no usable texture; lines flagged for a predicted σ above the limit); else ""."""
+    """When fewer than 95 % of the lines are restored: how many, and the longest unrestored line ranges by why
+    they were not restored — a run most of whose lines were flagged for a predicted σ above the limit (few or
+    poor matches: short clear islands, gap edges, a transient over poor ground, the record's ends), or one with
+    no differentials (no usable texture, or the record's ends); else ""."""
     if restoration is None:
         return ""
     axes = [a for a in axes if a != "yaw" and a in restoration]
@@ -96,14 +98,22 @@ def coverage_line(restoration, axes) -> str:
     if 1.0 - missing.mean() >= COVERAGE_SHOWN:
         return ""
     ranges = line_ranges(missing)
-    named = ", ".join(f"{a}–{b}" if b > a else f"{a}" for a, b in sorted(ranges[:RANGES_SHOWN]))
-    more = f" and {len(ranges) - RANGES_SHOWN} shorter runs" if len(ranges) > RANGES_SHOWN else ""
-    why = "no usable texture there (cloud, water, flat or dark ground)"
+    shown = ranges[:RANGES_SHOWN]
+    groups = {True: [], False: []}
+    for a, b in sorted(shown):
+        groups[bool(np.mean(flagged[a:b + 1]) >= 0.5)].append(f"{a}–{b}" if b > a else f"{a}")
+    more = f" (and {len(ranges) - RANGES_SHOWN} shorter runs)" if len(ranges) > RANGES_SHOWN else ""
     n_flag = int(np.count_nonzero(flagged & missing))
-    if n_flag:
-        why += (f"; {n_flag} of these lines were flagged instead, for a predicted σ above restoration.max_sigma_px "
-                f"(short clear islands, gap edges)")
-    return (f"  not restored: {missing.mean() * 100:.1f} % of the lines — lines {named}{more}: {why}")
+    parts = []
+    if groups[True]:
+        parts.append(f"flagged for a predicted σ above restoration.max_sigma_px (few or poor matches: short clear "
+                     f"islands, gap edges, a transient over poor ground, the record's ends): lines "
+                     f"{', '.join(groups[True])}")
+    if groups[False]:
+        parts.append(f"no differentials (no usable texture: cloud, water, flat or dark ground; or at the record's "
+                     f"ends, where a pair's second band has not seen the ground): lines {', '.join(groups[False])}")
+    return (f"  not restored: {missing.mean() * 100:.1f} % of the lines ({n_flag} of them flagged for their "
+            f"predicted σ) — " + "; ".join(parts) + more)
 
 
 #: the terminal names the error outside the unobservable parts when they take at least this much off an axis [px]

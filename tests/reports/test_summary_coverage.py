@@ -27,8 +27,19 @@ def test_a_cloudy_record_names_its_unrestored_lines_and_why():
     ds = _restoration(gaps=[(100, 400), (700, 720)], flagged=[(400, 430)])
     line = coverage_line(ds, ["roll", "pitch"])
     assert "35.0 % of the lines" in line
-    assert "lines 100–429, 700–719" in line and "no usable texture" in line
-    assert "30 of these lines were flagged" in line
+    assert "no usable texture: cloud, water, flat or dark ground" in line and line.endswith("lines 100–429, 700–719")
+    assert "30 of them flagged" in line and "max_sigma_px" not in line   # no run is mostly flagged
+
+
+def test_runs_mostly_flagged_are_named_apart_from_those_without_texture():
+    # a transient over half-water ground: its lines flagged for σ; the record's last lines had no differentials
+    ds = _restoration(gaps=[(980, 1000), (0, 5)], flagged=[(5, 120), (290, 815)])
+    line = coverage_line(ds, ["roll", "pitch"])
+    assert "flagged for a predicted σ above restoration.max_sigma_px" in line
+    flagged_part, texture_part = line.split("; no differentials")
+    assert "lines 0–119, 290–814" in flagged_part and "980" not in flagged_part
+    assert texture_part.endswith("lines 980–999")
+    assert "640 of them flagged" in line
 
 
 def test_a_mostly_restored_record_says_nothing():
