@@ -112,8 +112,8 @@ def coverage_line(restoration, axes) -> str:
     if groups[False]:
         parts.append(f"no differentials (no usable texture: cloud, water, flat or dark ground; or at the record's "
                      f"ends, where a pair's second band has not seen the ground): lines {', '.join(groups[False])}")
-    return (f"  not restored: {missing.mean() * 100:.1f} % of the lines ({n_flag} of them flagged for their "
-            f"predicted σ) — " + "; ".join(parts) + more)
+    flags = f" ({n_flag} of them flagged for their predicted σ)" if n_flag else ""
+    return f"  not restored: {missing.mean() * 100:.1f} % of the lines{flags} — " + "; ".join(parts) + more
 
 
 #: the terminal names the error outside the unobservable parts when they take at least this much off an axis [px]
