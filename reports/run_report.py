@@ -518,6 +518,16 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
                 "attitude to every pair (restore.observability.scene_offset_band). Its size depends on the "
                 "scene, not on the product; an AOCS knowledge whose band reaches the top of this one would hold "
                 "it.")
+    from .summary import notch_continuum_line_of_run
+
+    notch = notch_continuum_line_of_run(run, list(unc))
+    if notch:
+        pg.note(notch.strip()[0].upper() + notch.strip()[1:] + ". The spectrum estimate does not estimate the "
+                "prior round a frequency every pair is blind to; it bridges it from the notch's edge bins, the "
+                "smaller one, so that a line's skirt does not raise it. Under a broadband continuum that bridge "
+                "can fall to nothing while the pairs' flanks still see the jitter: the figure is the error the "
+                "filter built on the bridge adds to the best the pairs allow were the continuum at its sides' "
+                "level (restore.observability.notch_continuum).")
 
 
 def _matches_section(pg: _Page, run: D.RunData):

@@ -251,6 +251,44 @@ def scene_offset_line_of_run(run, axes) -> str | None:
     return scene_offset_line(ds.attrs if ds is not None else {}, taus, axes, eph)
 
 
+#: the notch line is said when the low bridge costs at least this much on some axis [px]
+NOTCH_CONTINUUM_SHOWN_PX = 0.01
+
+
+def notch_continuum_line(records: dict, axes, ifov_rad: float) -> str | None:
+    """Where a notch round the pairs' common blind frequencies was bridged below the continuum on its sides
+    (:func:`restore.observability.notch_continuum`), costing at least :data:`NOTCH_CONTINUUM_SHOWN_PX`: the
+    notch, the prior inside against the sides' level, and the error that adds; else None.
+
+    ``records``: ``{axis: integration record}`` (their prior, pairs, sampling and high-pass)."""
+    from restore.observability import record_notch_continuum
+
+    found = []
+    for a in axes:
+        rec = records.get(a)
+        if rec is None or a == "yaw":
+            continue
+        for n in record_notch_continuum(rec):
+            px = n.missing_rms_rad / ifov_rad
+            if px >= NOTCH_CONTINUUM_SHOWN_PX:
+                found.append(f"{a} {n.band_hz[0]:.1f}–{n.band_hz[1]:.1f} Hz (prior {n.bridged:.1e} against "
+                             f"{n.sides:.1e} rad²/Hz beside it): {px:.3f} px")
+    if not found:
+        return None
+    return ("  a blind frequency's notch bridged below the continuum on its sides, so the pairs' flanks there are "
+            "not restored and σ does not hold it: " + "; ".join(found))
+
+
+def notch_continuum_line_of_run(run, axes) -> str | None:
+    """:func:`notch_continuum_line` of a loaded run (None without a restoration)."""
+    if run.restoration is None:
+        return None
+    from restore.restoration_io import result_from_dataset
+
+    res = result_from_dataset(run.restoration)
+    return notch_continuum_line(res.integration, axes, res.pixel_ifov_rad)
+
+
 def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -> str:
     """A short text summary of a restored run.
 
@@ -315,6 +353,9 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
     offset = scene_offset_line_of_run(run, axes_r)
     if offset:
         lines.append(offset)
+    notch = notch_continuum_line_of_run(run, axes_r)
+    if notch:
+        lines.append(notch)
     disagreement = knowledge_check_line(run.restoration, axes_r,
                                         took_share=bool(run.settings.get("sigma_knowledge_check", True)))
     if disagreement:

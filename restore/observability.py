@@ -63,7 +63,8 @@ import numpy as np
 from .integration.transfer import fused_snr
 
 __all__ = ["Observability", "fused_snr", "observability", "record_observability", "band_power", "record_trend",
-           "scene_offset_band", "sun_offset_shares", "offset_misfit", "OFFSET_MISFIT"]
+           "scene_offset_band", "sun_offset_shares", "offset_misfit", "OFFSET_MISFIT", "NotchContinuum",
+           "notch_continuum", "record_notch_continuum", "wiener_error"]
 
 
 @dataclass
@@ -122,6 +123,111 @@ def record_observability(record) -> Observability:
         prior = spectrum_for_lines(list(record.diffs), list(record.taus), record.line_period_s)
     return observability(prior.freq, prior.psd, prior.noise_std, record.taus, record.line_period_s,
                          highpass_hz=record.highpass_hz)
+
+
+@dataclass(frozen=True)
+class NotchContinuum:
+    """A notch round a common blind frequency whose bridged prior lies below the continuum on both its sides
+    (:func:`notch_continuum`): band [Hz], the prior's level inside and the sides' [rad²/Hz, two-sided], and the
+    error the low bridge adds over the notch, as an RMS [rad]."""
+
+    band_hz: tuple
+    bridged: float
+    sides: float
+    missing_rms_rad: float
+
+
+def wiener_error(true_psd, assumed_psd, unit_snr) -> np.ndarray:
+    """Error PSD of the Wiener filter built on ``assumed_psd`` when the attitude's PSD is ``true_psd``.
+
+    With the fused SNR per unit of PSD ``u`` (:func:`fused_snr` of a PSD of 1), the filter keeps
+    ``k = S_a u / (1 + S_a u)`` of the fused measurement: error ``(1 − k)² S_t + k² / u``; with ``S_a = S_t``
+    this is the floor ``S_t / (1 + S_t u)``.
+    """
+    st = np.asarray(true_psd, dtype=np.float64)
+    sa = np.asarray(assumed_psd, dtype=np.float64)
+    u = np.asarray(unit_snr, dtype=np.float64)
+    k = sa * u / (1.0 + sa * u)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        noise = np.where(u > 0, k ** 2 / u, 0.0)
+    return (1.0 - k) ** 2 * st + noise
+
+
+def notch_continuum(freq, psd, noise_std, taus, dt: float, *, highpass_hz: float = 0.0) -> list[NotchContinuum]:
+    """The notches whose prior was bridged below the continuum on both their sides.
+
+    Round every frequency all pairs are blind to, the spectrum estimate does
+    not estimate the prior (:func:`restore.integration.spectrum.notch_mask`, the
+    same notches): it bridges it from the notch's edge bins, the smaller one, so
+    that a line's skirt on one side does not raise it. Under a continuum the
+    gated estimate's edge bin is as often 0 as the level, and the prior inside
+    then says there is nothing there: the filter restores nothing of what the
+    pairs' flanks still see, and σ, drawn from that prior, holds none of it.
+    This reads each side's level as the median of the prior over the notch's
+    width beside it (a line's few bins do not move a median; a side that is
+    mostly undetected reads 0), takes the smaller side, and reports the error
+    the filter built on the bridge adds over the notch to the best the pairs
+    allow were the continuum at that level (:func:`wiener_error`, true PSD
+    the larger of the prior and the level): what the flanks could have given
+    back and did not. Deep in the notch, where no pair sees it, the continuum
+    is unobservable either way and is not counted.
+
+    Parameters
+    ----------
+    freq, psd
+        The axis's prior (one-sided grid [Hz], two-sided PSD [rad²/Hz]), as the integration record holds it.
+    noise_std : float or ndarray (pairs,)
+        The pairs' white noise [rad per line].
+    taus, dt
+        Pair delays and line period [s].
+    highpass_hz : float
+        Notches below it are the AOCS knowledge's.
+
+    Returns
+    -------
+    list of NotchContinuum
+        Only notches where the sides' level exceeds the bridge; empty otherwise.
+    """
+    from .integration.spectrum import notch_mask
+
+    f = np.asarray(freq, dtype=np.float64)
+    s = np.asarray(psd, dtype=np.float64)
+    taus = np.atleast_1d(np.asarray(taus, dtype=np.float64))
+    nu = np.broadcast_to(np.asarray(noise_std, dtype=np.float64), taus.shape) ** 2 * float(dt)
+    if f.size < 3 or not np.all(nu > 0):
+        return []
+    poor = notch_mask(f, taus, nu)
+    unit_snr = fused_snr(f, np.ones(f.size), np.sqrt(nu / float(dt)), taus, dt)
+    edges = np.diff(np.r_[0, poor.astype(np.int8), 0])
+    out = []
+    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+        if f[a] < highpass_hz:
+            continue
+        w = b - a
+        levels = []
+        for lo, hi in ((max(a - w, 0), a), (b, min(b + w, s.size))):
+            side = s[lo:hi][~poor[lo:hi]]
+            levels.append(float(np.median(side)) if side.size else 0.0)
+        level = min(levels)
+        bridged = float(np.median(s[a:b]))
+        if not level > bridged:
+            continue
+        inside = np.zeros(f.size, dtype=bool)
+        inside[a:b] = True
+        true_s = np.maximum(s, level)
+        extra = wiener_error(true_s, s, unit_snr) - wiener_error(true_s, true_s, unit_snr)
+        out.append(NotchContinuum(band_hz=(float(f[a]), float(f[b - 1])), bridged=bridged, sides=level,
+                                  missing_rms_rad=float(np.sqrt(max(band_power(f, extra, inside), 0.0)))))
+    return out
+
+
+def record_notch_continuum(record) -> list[NotchContinuum]:
+    """:func:`notch_continuum` of an axis's integration record (empty for a method that reports no prior)."""
+    prior = record.spectrum
+    if prior is None:
+        return []
+    return notch_continuum(prior.freq, prior.psd, prior.noise_std, record.taus, record.line_period_s,
+                           highpass_hz=record.highpass_hz)
 
 
 def record_trend(series) -> np.ndarray:

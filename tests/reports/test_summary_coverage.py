@@ -57,3 +57,36 @@ def test_transient_windows_are_named_with_their_axis_and_lines():
     assert transient_line(ds, ["roll", "pitch"]).endswith("roll lines 0–748")
     assert transient_line(xr.Dataset(attrs={"integration": json.dumps({"roll": {"options": {}}})}), ["roll"]) is None
     assert transient_line(None, ["roll"]) is None
+
+
+def test_a_notch_bridged_below_a_continuum_is_said_with_its_axis_band_and_cost():
+    from types import SimpleNamespace
+
+    from restore.integration.spectrum import notch_mask
+    from reports.summary import NOTCH_CONTINUUM_SHOWN_PX, notch_continuum_line
+
+    dt, taus, sigma, ifov = 0.4e-3, np.array([7.4e-3, 22.2e-3, 14.8e-3]), 2e-7, 4.03e-6
+    f = np.fft.rfftfreq(6000, dt)
+    poor = notch_mask(f, taus, np.full(3, sigma ** 2 * dt))
+
+    def record(level, bridge):
+        s = np.where(poor, bridge, level)
+        return SimpleNamespace(spectrum=SimpleNamespace(freq=f, psd=s, noise_std=np.full(3, sigma)), taus=taus,
+                               line_period_s=dt, highpass_hz=2.0)
+
+    import re
+
+    from restore.observability import record_notch_continuum
+
+    line = notch_continuum_line({"roll": record(1e-14, 1e-17), "pitch": record(1e-14, 1e-14)}, ["roll", "pitch"],
+                                ifov)
+    assert line is not None and "pitch" not in line           # pitch's notch holds its continuum: nothing to say
+    said = [(float(lo), float(hi), float(px)) for lo, hi, px in
+            re.findall(r"roll (\d+\.\d)–(\d+\.\d) Hz \(prior 1\.0e-17 against 1\.0e-14 rad²/Hz beside it\): "
+                       r"(\d\.\d{3}) px", line)]
+    assert said and said[0][0] < 135.1 < said[0][1]           # the common blind frequency's notch first
+    expected = [n.missing_rms_rad / ifov for n in record_notch_continuum(record(1e-14, 1e-17))]
+    assert [px for *_, px in said] == [round(v, 3) for v in expected if v >= NOTCH_CONTINUUM_SHOWN_PX]
+    # a continuum too weak to cost NOTCH_CONTINUUM_SHOWN_PX is not said; no record, nothing said
+    assert notch_continuum_line({"roll": record(1e-19, 0.0)}, ["roll"], ifov) is None
+    assert notch_continuum_line({}, ["roll"], ifov) is None

@@ -90,3 +90,58 @@ def test_a_band_offset_towards_the_sun_splits_between_pitch_and_roll_by_its_azim
         assert s["pitch"] == pytest.approx(np.cos(np.radians(az - track)) ** 2)
     # the sun behind or ahead is the same line of offset
     assert sun_offset_shares(30.0) == pytest.approx(sun_offset_shares(210.0))
+
+
+def test_the_wiener_error_of_a_wrong_prior():
+    from restore.observability import wiener_error
+
+    st, u = np.array([2.0, 2.0, 2.0, 2.0]), np.array([0.5, 0.5, 3.0, 0.0])
+    # the right prior: the floor S / (1 + S u); no prior: the whole attitude; no information: the whole attitude
+    np.testing.assert_allclose(wiener_error(st, st, u)[:3], st[:3] / (1 + st[:3] * u[:3]))
+    np.testing.assert_allclose(wiener_error(st, np.zeros(4), u), st)
+    assert wiener_error(st, st, u)[3] == pytest.approx(2.0)
+    # any other prior does worse than the right one: k = Sa u / (1 + Sa u), (1 − k)² S + k² / u
+    sa = np.array([0.1, 20.0, 0.5, 1.0])
+    k = sa[:3] * u[:3] / (1 + sa[:3] * u[:3])
+    np.testing.assert_allclose(wiener_error(st, sa, u)[:3], (1 - k) ** 2 * st[:3] + k ** 2 / u[:3])
+    assert np.all(wiener_error(st, sa, u)[:3] > wiener_error(st, st, u)[:3])
+
+
+def _phr_prior(level, notch_value, line=None):
+    """A prior on phr_cmg's pairs: ``level`` everywhere, ``notch_value`` in the notches the spectrum estimate
+    bridges (``notch_mask``), optionally a line; noise 0.05 px-ish per line."""
+    from restore.integration.spectrum import notch_mask
+
+    dt, taus, sigma = 0.4e-3, np.array([7.4e-3, 22.2e-3, 14.8e-3]), 2e-7
+    f = np.fft.rfftfreq(6000, dt)
+    s = np.full(f.size, float(level))
+    poor = notch_mask(f, taus, np.full(3, sigma ** 2 * dt))
+    s[poor] = notch_value
+    if line is not None:
+        s[np.argmin(abs(f - line))] = 1e-12
+    return f, s, sigma, taus, dt, poor
+
+
+def test_a_notch_bridged_below_its_sides_continuum_is_found_with_the_error_it_adds():
+    from restore.observability import notch_continuum, wiener_error
+
+    f, s, sigma, taus, dt, poor = _phr_prior(1e-14, 1e-17)
+    found = notch_continuum(f, s, sigma, taus, dt, highpass_hz=2.0)
+    assert found and all(n.sides == pytest.approx(1e-14) and n.bridged == pytest.approx(1e-17) for n in found)
+    first = found[0]
+    assert 129.0 < first.band_hz[0] < 135.1 < first.band_hz[1] < 141.0     # the common blind frequency's notch
+    # the error the bridge adds, written out: Wiener on the bridge minus Wiener on the continuum, over the notch
+    inside = (f >= first.band_hz[0]) & (f <= first.band_hz[1])
+    u = fused_snr(f, np.ones(f.size), sigma, taus, dt)
+    full = np.full(f.size, 1e-14)
+    extra = wiener_error(full, s, u) - wiener_error(full, full, u)
+    assert first.missing_rms_rad == pytest.approx(np.sqrt(band_power(f, extra, inside)), rel=1e-9)
+    assert first.missing_rms_rad > 0
+    # bridged at the continuum: nothing found; a line-only spectrum (zero beside the notch): nothing found
+    f, s, sigma, taus, dt, _ = _phr_prior(1e-14, 1e-14)
+    assert notch_continuum(f, s, sigma, taus, dt) == []
+    f, s, sigma, taus, dt, _ = _phr_prior(0.0, 0.0, line=126.8)
+    assert notch_continuum(f, s, sigma, taus, dt) == []
+    # below the high-pass a notch is the AOCS knowledge's
+    f, s, sigma, taus, dt, _ = _phr_prior(1e-14, 1e-17)
+    assert notch_continuum(f, s, sigma, taus, dt, highpass_hz=f[-1] + 1.0) == []
