@@ -508,26 +508,25 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
             "the limit (two sampling spreads) one of the two predictions is short by at least the excess, and the "
             "data cannot tell which; σ takes the images' share of it (restoration.sigma_knowledge_check), and the "
             "cell gives, in brackets, σ if the images' prediction is the short one.")
-    from .summary import scene_offset_line_of_run
+    from .summary import notch_continuum_line_of_run, scene_offset_line_of_run
 
-    offset = scene_offset_line_of_run(run, list(unc))
-    if offset:
-        pg.note(offset.strip()[0].upper() + offset.strip()[1:] + ": each band is a different blend of the scene's "
-                "sunlit and shaded features, offset towards the sun by amounts that follow the scene's large "
-                "features, and where the pairs see the attitude through about 2π f τ such an offset is an "
-                "attitude to every pair (restore.observability.scene_offset_band). Its size depends on the "
-                "scene, not on the product; an AOCS knowledge whose band reaches the top of this one would hold "
-                "it.")
-    from .summary import notch_continuum_line_of_run
-
-    notch = notch_continuum_line_of_run(run, list(unc))
-    if notch:
-        pg.note(notch.strip()[0].upper() + notch.strip()[1:] + ". The spectrum estimate does not estimate the "
-                "prior round a frequency every pair is blind to; it bridges it from the notch's edge bins, the "
-                "smaller one, so that a line's skirt does not raise it. Under a broadband continuum that bridge "
-                "can fall to nothing while the pairs' flanks still see the jitter: the figure is the error the "
-                "filter built on the bridge adds to the best the pairs allow were the continuum at its sides' "
-                "level (restore.observability.notch_continuum).")
+    explained = (
+        (scene_offset_line_of_run(run, list(unc)),
+         ": each band is a different blend of the scene's sunlit and shaded features, offset towards the sun by "
+         "amounts that follow the scene's large features, and where the pairs see the attitude through about "
+         "2π f τ such an offset is an attitude to every pair (restore.observability.scene_offset_band). Its size "
+         "depends on the scene, not on the product; an AOCS knowledge whose band reaches the top of this one "
+         "would hold it."),
+        (notch_continuum_line_of_run(run, list(unc)),
+         ". The spectrum estimate does not estimate the prior round a frequency every pair is blind to; it "
+         "bridges it from the notch's edge bins, the smaller one, so that a line's skirt does not raise it. "
+         "Under a broadband continuum that bridge can fall to nothing while the pairs' flanks still see the "
+         "jitter: the figure is the error the filter built on the bridge adds to the best the pairs allow were "
+         "the continuum at its sides' level (restore.observability.notch_continuum)."))
+    for line, why in explained:
+        if line:
+            text = line.strip()
+            pg.note(text[0].upper() + text[1:] + why)
 
 
 def _matches_section(pg: _Page, run: D.RunData):
