@@ -193,11 +193,11 @@ def notch_continuum(freq, psd, noise_std, taus, dt: float, *, highpass_hz: float
     f = np.asarray(freq, dtype=np.float64)
     s = np.asarray(psd, dtype=np.float64)
     taus = np.atleast_1d(np.asarray(taus, dtype=np.float64))
-    nu = np.broadcast_to(np.asarray(noise_std, dtype=np.float64), taus.shape) ** 2 * float(dt)
-    if f.size < 3 or not np.all(nu > 0):
+    sd = np.broadcast_to(np.asarray(noise_std, dtype=np.float64), taus.shape)
+    if f.size < 3 or not np.all(sd > 0):
         return []
-    poor = notch_mask(f, taus, nu)
-    unit_snr = fused_snr(f, np.ones(f.size), np.sqrt(nu / float(dt)), taus, dt)
+    poor = notch_mask(f, taus, sd ** 2 * float(dt))
+    unit_snr = fused_snr(f, np.ones(f.size), sd, taus, dt)
     edges = np.diff(np.r_[0, poor.astype(np.int8), 0])
     out = []
     for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
