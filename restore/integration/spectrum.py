@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.fft import next_fast_len, rfft
+from scipy.linalg import toeplitz
 from scipy.ndimage import maximum_filter1d, uniform_filter1d
 from scipy.signal import find_peaks
 from scipy.stats import gamma
@@ -26,7 +27,7 @@ from scipy.stats import gamma
 from ._common import per_pair, prepare
 
 __all__ = ["SpectralEstimate", "estimate_differential_noise", "estimate_spectrum", "find_lines", "Lines",
-           "notch_mask"]
+           "notch_mask", "NotchLevel", "notch_levels"]
 
 _BLIND_G2 = 0.05
 
@@ -281,6 +282,104 @@ def notch_mask(f, taus, nu, *, min_gain: float = 0.1, window_hz: float = 5.0) ->
     info = (g2 * (nu.min() / nu)[:, None]).sum(0)
     Lw = max(1, int(round(max(window_hz, 0.5 / taus.min()) / df))) | 1
     return (info < min_gain * maximum_filter1d(info, Lw)) & (f >= 0.5 / taus.max())
+
+
+@dataclass
+class NotchLevel:
+    """A flat PSD level estimated over one notch of :func:`notch_mask` (:func:`notch_levels`)."""
+
+    #: the notch's bins on the frequency grid, ``[start, stop)``
+    bins: tuple[int, int]
+    #: its frequencies [Hz], first and last bin
+    band_hz: tuple[float, float]
+    #: least-squares level of the two-sided PSD over the notch [rad²/Hz] (may be < 0: noise)
+    level: float
+    #: the level that noise alone exceeds with the test's false-alarm probability [rad²/Hz]
+    threshold: float
+
+    @property
+    def detected(self) -> bool:
+        return bool(self.level > self.threshold)
+
+
+def notch_levels(diffs, taus, dt, *, n_fft: int, noise_std, false_alarm: float = 0.01, min_gain: float = 0.1,
+                 window_hz: float = 5.0, low_hz: float = 0.0) -> list[NotchLevel]:
+    """The flat PSD level of each notch :func:`estimate_spectrum` bridges, from the notch's own periodograms.
+
+    Bin by bin the notch is unusable (``|G_j|² ≈ 0``: noise and leakage over
+    ~0); over its whole width it is not: the pairs' flanks still see the
+    attitude, weakly. Modelling the PSD as one constant ``S`` across the notch,
+    ``P_j(f) / ν_j − 1 = a_j(f) S`` with ``a_j = |G_j|² / ν_j`` is fitted by
+    least squares over the notch's bins and the pairs,
+    ``S = Σ a_j (P_j/ν_j − 1) / Σ a_j²`` — dominated by the flanks, where the
+    pairs see most. Noise alone gives ``Σ a_j P_j / ν_j`` the mean ``Σ a_j``
+    and a variance from the taper's correlation of neighbouring bins; a gamma
+    law with those moments gives the level noise exceeds with probability
+    ``false_alarm`` over all the notches (Bonferroni).
+
+    Call it on differentials from which everything outside the notches has
+    been taken out (the residual of a fit, the fit's own in-notch part added
+    back): a strong line beside a notch leaks into its flanks, which weigh
+    most here.
+
+    Parameters
+    ----------
+    diffs, taus, dt
+        As for :func:`estimate_spectrum` (NaN = gap).
+    n_fft : int
+        The frequency grid's FFT length (the notches' bins are on it).
+    noise_std : float or sequence
+        Each pair's white-noise standard deviation [rad per sample].
+    false_alarm : float
+        Probability that noise alone makes at least one notch detected.
+    min_gain, window_hz
+        The notches' definition (:func:`notch_mask`).
+    low_hz : float
+        Notches starting below this are not estimated (the AOCS knowledge's band).
+
+    Returns
+    -------
+    list of NotchLevel
+    """
+    D, valid, taus, dt = prepare(diffs, taus, dt)
+    p, n = D.shape
+    n_fft = int(n_fft)
+    if n_fft < n:
+        raise ValueError(f"n_fft: must be >= the number of samples ({n}), got {n_fft}")
+    if not 0 < false_alarm < 1:
+        raise ValueError(f"false_alarm: must be in (0, 1), got {false_alarm}")
+    sd = per_pair(noise_std, p, "noise_std")
+    if sd is None or not np.all(sd > 0):
+        raise ValueError(f"noise_std: must be > 0 for every pair, got {noise_std!r}")
+    nu = sd**2 * dt
+    f = np.fft.rfftfreq(n_fft, dt)
+    poor = notch_mask(f, taus, nu, min_gain=min_gain, window_hz=window_hz)
+    edges = np.diff(np.r_[0, poor.astype(np.int8), 0])
+    spans = [(a, b) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)) if f[a] >= low_hz]
+    if not spans:
+        return []
+    P, shapes = _periodograms(np.where(valid, D, 0.0), valid, dt, n_fft, min_segment=_min_segment(taus, dt),
+                              smooth_bins=(1,))
+    # correlation of neighbouring periodogram bins: the taper of the longest segment
+    seg = max((b - a for j in range(p) for a, b in _segments(valid[j], _min_segment(taus, dt))), default=n)
+    w2 = _taper(seg) ** 2
+    width = max(b - a for a, b in spans)
+    rho2 = (np.abs(np.fft.fft(w2, n=n_fft))[:width] / np.sum(w2)) ** 2
+    out = []
+    for a, b in spans:
+        g2 = 2 * (1 - np.cos(2 * np.pi * f[None, a:b] * taus[:, None]))
+        A = g2 / nu[:, None]
+        norm = float((A**2).sum())
+        if not norm > 0:
+            continue
+        t_stat = float((A * P[:, a:b] / nu[:, None]).sum())
+        mu = float(A.sum())
+        corr = toeplitz(rho2[:b - a])
+        var = float(sum(A[j] @ corr @ A[j] / shapes[j, 0] for j in range(p)))
+        thr = gamma.ppf(1 - false_alarm / len(spans), a=mu**2 / var, scale=var / mu) if var > 0 else mu
+        out.append(NotchLevel(bins=(int(a), int(b)), band_hz=(float(f[a]), float(f[b - 1])),
+                              level=(t_stat - mu) / norm, threshold=float(thr - mu) / norm))
+    return out
 
 
 @dataclass

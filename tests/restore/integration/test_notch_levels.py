@@ -1,0 +1,156 @@
+"""The level of each blind notch estimated over its whole width (restore.integration.spectrum.notch_levels) and
+the MAP's prior raised to it (restore.axis_integration._notch_prior)."""
+import numpy as np
+import pytest
+
+import restore.axis_integration as axis_integration
+from restore.axis_integration import integrate_axis, notch_residual
+from restore.integration.spectrum import notch_levels, notch_mask
+from restore.integration.wiener import integrate_wiener
+
+DT = 1 / 2700.0
+STEPS = (20, 40, 60)            # delays in lines: every pair is blind at 135 Hz and its multiples
+TAUS = np.array(STEPS) * DT
+N = 4400
+N_FFT = 6600
+SD = 1e-8                        # the differentials' white noise [rad]
+
+
+def _differentials(theta, rng, sd=SD):
+    return [theta[k:k + N] - theta[:N] + rng.normal(0.0, sd, N) for k in STEPS]
+
+
+def _white(level, rng, top_hz=None):
+    """An attitude whose two-sided PSD is ``level`` [rad²/Hz] at every frequency (up to ``top_hz``, 0 above)."""
+    x = rng.normal(0.0, np.sqrt(level / DT), N + max(STEPS))
+    if top_hz is None:
+        return x
+    spec = np.fft.rfft(x)
+    return np.fft.irfft(np.where(np.fft.rfftfreq(x.size, DT) <= top_hz, spec, 0.0), n=x.size)
+
+
+def test_notch_levels_noise_alone_is_rarely_detected():
+    hits = 0
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        levels = notch_levels(_differentials(np.zeros(N + 100), rng), TAUS, DT, n_fft=N_FFT, noise_std=SD)
+        assert len(levels) >= 8                         # 135, 270, ... 1215 Hz below Nyquist (1350 Hz)
+        hits += any(nl.detected for nl in levels)
+        # the threshold is the noise's: a few standard deviations of the estimate, never 0
+        assert all(nl.threshold > 0 for nl in levels)
+    assert hits <= 2                                    # false_alarm = 0.01 per call
+
+
+def test_notch_levels_of_a_flat_attitude_spectrum_are_its_level():
+    """A white attitude (PSD S0 everywhere) seen through the pairs: every notch reads S0 (the estimate is
+    unbiased: its mean over seeds within 3 of its own standard errors of S0)."""
+    s0 = 1e-16
+    rows = []
+    for seed in range(24):
+        rng = np.random.default_rng(100 + seed)
+        levels = notch_levels(_differentials(_white(s0, rng), rng), TAUS, DT, n_fft=N_FFT, noise_std=SD)
+        assert all(nl.detected for nl in levels)
+        rows.append([nl.level for nl in levels[:4]])
+    rows = np.asarray(rows)
+    mean, sem = rows.mean(0), rows.std(0) / np.sqrt(rows.shape[0])
+    assert np.all(np.abs(mean - s0) < 3 * sem), (mean, sem)
+    assert np.all(sem < 0.2 * s0)
+
+
+def test_notch_levels_band_and_bins_are_the_notch_mask():
+    rng = np.random.default_rng(3)
+    levels = notch_levels(_differentials(_white(1e-16, rng), rng), TAUS, DT, n_fft=N_FFT, noise_std=SD,
+                          low_hz=200.0)
+    f = np.fft.rfftfreq(N_FFT, DT)
+    poor = notch_mask(f, TAUS, np.full(3, SD**2 * DT))
+    assert levels[0].band_hz[0] > 200.0                 # the 135 Hz notch is below low_hz
+    for nl in levels:
+        a, b = nl.bins
+        assert poor[a:b].all() and not poor[a - 1] and (b == poor.size or not poor[b])
+        assert nl.band_hz == (f[a], f[b - 1])
+        blind = 135.0 * round(0.5 * (nl.band_hz[0] + nl.band_hz[1]) / 135.0)
+        assert nl.band_hz[0] < blind <= nl.band_hz[1]
+
+
+def test_notch_levels_bad_input():
+    d = [np.zeros(N)] * 3
+    with pytest.raises(ValueError, match="n_fft"):
+        notch_levels(d, TAUS, DT, n_fft=N - 1, noise_std=SD)
+    with pytest.raises(ValueError, match="noise_std"):
+        notch_levels(d, TAUS, DT, n_fft=N_FFT, noise_std=0.0)
+    with pytest.raises(ValueError, match="false_alarm"):
+        notch_levels(d, TAUS, DT, n_fft=N_FFT, noise_std=SD, false_alarm=1.0)
+
+
+def _line_beside_the_notch(rng):
+    """A strong line on the 135 Hz notch's flank (outside it) and a weak white floor, no noise floor issue."""
+    t = np.arange(N + max(STEPS)) * DT
+    return 2e-6 * np.sin(2 * np.pi * 127.3 * t + 0.4) + _white(1e-19, rng)
+
+
+def test_notch_residual_takes_out_a_line_beside_the_notch():
+    """Raw, the line's skirt leaks into the notch's flanks and reads as a level there; in what the MAP leaves
+    (its in-notch part added back) it does not."""
+    rng = np.random.default_rng(7)
+    d = _differentials(_line_beside_the_notch(rng), rng)
+    raw = notch_levels(d, TAUS, DT, n_fft=N_FFT, noise_std=SD)[0]
+    assert raw.detected                                # the skirt, not the attitude
+    res = integrate_wiener(d, TAUS, DT, noise_std=SD, return_details=True)
+    prior = axis_integration._prior_of(res.spectrum, 3)
+    assert res.theta_grid.size == N_FFT or 2 * (prior.freq.size - 1) == res.theta_grid.size
+    r = notch_residual(res, d, TAUS, DT, None, prior)
+    clean = notch_levels(r, TAUS, DT, n_fft=res.theta_grid.size, noise_std=prior.noise_std)[0]
+    assert not clean.detected and clean.level < 0.05 * raw.level
+
+
+def test_notch_residual_keeps_what_the_bridge_explained():
+    """With a prior in the notch near the true level, the MAP explains part of the notch's flanks: the residual
+    alone would read less than the level, the residual with the field's in-notch part added back reads it."""
+    s0 = 1e-16
+    lv = []
+    for seed in range(6):
+        rng = np.random.default_rng(40 + seed)
+        d = _differentials(_white(s0, rng), rng)
+        res = integrate_wiener(d, TAUS, DT, noise_std=SD, return_details=True)
+        prior = axis_integration._prior_of(res.spectrum, 3)
+        m = res.theta_grid.size
+        a, b = notch_levels(d, TAUS, DT, n_fft=m, noise_std=SD)[0].bins
+        prior.psd[a:b] = s0                          # the bridge at the true level
+        res = integrate_wiener(d, TAUS, DT, noise_std=SD, psd=(prior.freq, prior.psd), return_details=True)
+        kept = notch_levels(notch_residual(res, d, TAUS, DT, None, prior), TAUS, DT, n_fft=m, noise_std=SD)[0]
+        left = notch_levels([x - p for x, p in zip(d, res.predicted)], TAUS, DT, n_fft=m, noise_std=SD)[0]
+        lv.append((kept.level, left.level))
+    kept, left = np.asarray(lv).mean(0)
+    assert 0.7 * s0 < kept < 1.4 * s0
+    assert left < 0.6 * s0
+
+
+def test_integrate_axis_raises_a_notch_bridged_below_a_continuum(monkeypatch):
+    """A flat continuum to 400 Hz whose gated estimate bridges the 135 Hz notch at 0 (this seed): the MAP's
+    prior in the notch takes the notch's own level, and the error at the notch's flanks falls."""
+    s0 = 1e-16
+    rng = np.random.default_rng(12)
+    theta = _white(s0, rng, top_hz=400.0)
+    d = _differentials(theta, rng, sd=3e-8)
+
+    def run(raise_factor):
+        monkeypatch.setattr(axis_integration, "NOTCH_RAISE", raise_factor)
+        return integrate_axis(d, list(TAUS), DT, method="wiener", sigmas=None, highpass_hz=0.0)
+
+    bridged, raised = run(np.inf), run(2.0)
+    f = bridged.spectrum.freq
+    inside = (f > 128) & (f < 142)
+    assert np.median(bridged.spectrum.psd[inside]) < 0.1 * s0
+    assert 0.5 * s0 < np.median(raised.spectrum.psd[inside]) < 2 * s0
+    # outside the notches nothing changed
+    out = ~notch_mask(f, TAUS, raised.spectrum.noise_std**2 * DT)
+    np.testing.assert_array_equal(raised.spectrum.psd[out], bridged.spectrum.psd[out])
+
+    def notch_error(est):
+        e = np.nan_to_num(est - (theta[:N] - theta[:N].mean()))
+        spec = np.fft.rfft(e - e.mean())
+        fe = np.fft.rfftfreq(N, DT)
+        flanks = (np.abs(fe - 135.0) > 1.5) & (np.abs(fe - 135.0) < 7.0)
+        return np.sqrt(np.sum(np.abs(spec[flanks]) ** 2))
+
+    assert notch_error(raised.theta) < 0.5 * notch_error(bridged.theta)
