@@ -42,16 +42,23 @@ def blind_tone_line(restoration, axes) -> str | None:
             + "; ".join(found))
 
 
-def transient_line(restoration, axes) -> str | None:
-    """The line windows where a transient the stationary prior could not follow was restored without it
-    (``transient_lines`` in the options of restoration.nc's ``integration`` record), or None."""
+def _integration_info(restoration) -> dict | None:
+    """restoration.nc's ``integration`` record (axis → pairs, method, options), or None (none, or unreadable)."""
     import json
 
     if restoration is None:
         return None
     try:
-        info = json.loads(str(restoration.attrs.get("integration", "{}")))
+        return json.loads(str(restoration.attrs.get("integration", "{}")))
     except ValueError:
+        return None
+
+
+def transient_line(restoration, axes) -> str | None:
+    """The line windows where a transient the stationary prior could not follow was restored without it
+    (``transient_lines`` in the options of restoration.nc's ``integration`` record), or None."""
+    info = _integration_info(restoration)
+    if info is None:
         return None
     found = []
     for a in axes:
@@ -62,6 +69,27 @@ def transient_line(restoration, axes) -> str | None:
         return None
     return ("  a transient the stationary prior could not follow, restored without it (least squares): "
             + "; ".join(found))
+
+
+def notch_level_line(restoration, axes) -> str | None:
+    """The notches whose prior the integration took from their own level (``notch_levels`` in the options of
+    restoration.nc's ``integration`` record: :func:`restore.axis_integration._notch_prior`), with the RMS that
+    level holds over each notch [px], or None."""
+    info = _integration_info(restoration)
+    if info is None:
+        return None
+    ifov = float(restoration.attrs.get("pixel_ifov_rad", np.nan))
+    found = []
+    for a in axes:
+        raised = (info.get(a) or {}).get("options", {}).get("notch_levels")
+        if raised:
+            # a two-sided PSD over the notch's band and its mirror image
+            found.append(f"{a} " + ", ".join(f"{lo:.1f}–{hi:.1f} Hz ({np.sqrt(2 * lv * (hi - lo)) / ifov:.3f} px)"
+                                             for lo, hi, lv in raised))
+    if not found:
+        return None
+    return ("  a blind notch's prior taken from its own level (the pairs' flanks see a continuum through it; "
+            "its middle stays unobservable): " + "; ".join(found))
 
 
 #: below this fraction of restored lines the terminal says which lines were not restored, and why
@@ -353,9 +381,9 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
     offset = scene_offset_line_of_run(run, axes_r)
     if offset:
         lines.append(offset)
-    notch = notch_continuum_line_of_run(run, axes_r)
-    if notch:
-        lines.append(notch)
+    for notch in (notch_level_line(run.restoration, axes_r), notch_continuum_line_of_run(run, axes_r)):
+        if notch:
+            lines.append(notch)
     disagreement = knowledge_check_line(run.restoration, axes_r,
                                         took_share=bool(run.settings.get("sigma_knowledge_check", True)))
     if disagreement:

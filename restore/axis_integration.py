@@ -37,8 +37,9 @@ from .integration.methods import IntegrationMethod, integration_method
 from .integration.wiener import blind_tones, tone_columns
 from .synthesis import highpass_nan
 
-__all__ = ["AxisIntegration", "PriorSpectrum", "integrate_axis", "lag_corrected_differentials", "periodic_highpass",
-           "running_misfit", "transient_windows", "explained_windows", "transient_blend"]
+__all__ = ["AXIS_OPTIONS", "AxisIntegration", "PriorSpectrum", "integrate_axis", "lag_corrected_differentials",
+           "periodic_highpass", "running_misfit", "transient_windows", "explained_windows", "transient_blend",
+           "notch_residual"]
 
 
 @dataclass
@@ -216,6 +217,10 @@ def _prior_again(res, prior, spec, measured, taus, dt, opts, data, lags, details
     return res, prior
 
 
+#: options this module reads or records in an axis's options, not the method's: a caller that runs the method
+#: itself (:func:`restore.integration.integrate`) leaves them out
+AXIS_OPTIONS = ("transient_lines", "transient_lsq", "notch_levels")
+
 #: a notch's prior is raised to its own estimated level (:func:`_notch_prior`) when that level is detected and
 #: exceeds the bridge by this factor (below it the MAP would barely change: not worth a solve)
 NOTCH_RAISE = 2.0
@@ -282,7 +287,10 @@ def _notch_prior(res, prior, spec, measured, taus, dt, opts, data, lags, details
     notch the flanks do see it: :func:`restore.integration.spectrum.notch_levels`
     estimates one level per notch from what the MAP leaves
     (:func:`notch_residual`), and where it is detected and above the bridge
-    (× :data:`NOTCH_RAISE`) the notch takes it. Unchanged when nothing is.
+    (× :data:`NOTCH_RAISE`) the notch takes it; ``opts["notch_levels"]`` then
+    records ``[first Hz, last Hz, level rad²/Hz]`` of each notch raised (for
+    the record and the terminal: a frozen rerun takes the prior as it is).
+    Unchanged when nothing is.
     """
     from dataclasses import replace
 
@@ -293,17 +301,19 @@ def _notch_prior(res, prior, spec, measured, taus, dt, opts, data, lags, details
         return res, prior
     f = np.asarray(prior.freq, dtype=np.float64)
     psd = np.asarray(prior.psd, dtype=np.float64).copy()
-    raised = False
+    raised = []
     for nl in notch_levels(resid, taus, dt, n_fft=2 * (f.size - 1), noise_std=prior.noise_std, low_hz=f[1]):
         a, b = nl.bins
         if nl.detected and nl.level > NOTCH_RAISE * float(np.median(psd[a:b])):
             psd[a:b] = np.maximum(psd[a:b], nl.level)
-            raised = True
+            raised.append([nl.band_hz[0], nl.band_hz[1], nl.level])
     if not raised:
         return res, prior
+    opts["notch_levels"] = raised
     prior = replace(prior, psd=psd)
     kw = {} if lags is None else {"lags": lags}
-    res = integrate(measured, taus, dt, method=spec.name, **spec.frozen_options(opts, prior), **data, **kw, **details)
+    fixed = {k: v for k, v in spec.frozen_options(opts, prior).items() if k != "notch_levels"}
+    res = integrate(measured, taus, dt, method=spec.name, **fixed, **data, **kw, **details)
     return res, prior
 
 
@@ -450,6 +460,7 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
     opts = dict(options or {})
     windows = opts.pop("transient_lines", None)
     local_weights = opts.pop("transient_lsq", None)
+    opts.pop("notch_levels", None)     # what :func:`_notch_prior` did, for the record: the prior holds it
     diffs = [np.asarray(d, dtype=np.float64) for d in diffs]
     taus = [float(t) for t in taus]
     timed = lags is not None and any(np.any(np.asarray(lg) != 0) for lg in lags)

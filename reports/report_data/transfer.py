@@ -108,8 +108,12 @@ def _transfer_estimate(x, y, fs, ws) -> tuple:
 
 
 def _options_for_pairs(options: dict, idx: Sequence[int], n_pairs: int) -> dict:
-    """Options restricted to the pairs ``idx`` (per-pair sequences such as ``noise_std`` are sliced)."""
-    out = dict(options)
+    """Options restricted to the pairs ``idx`` (per-pair sequences such as ``noise_std`` are sliced), without
+    those the axis's integration reads or records rather than the method (a transient's windows, the notches
+    raised: :data:`restore.axis_integration.AXIS_OPTIONS`)."""
+    from restore.axis_integration import AXIS_OPTIONS
+
+    out = {k: v for k, v in options.items() if k not in AXIS_OPTIONS}
     for key in ("noise_std",):
         v = out.get(key)
         if v is not None and np.ndim(v) == 1 and len(v) == n_pairs:

@@ -154,3 +154,32 @@ def test_integrate_axis_raises_a_notch_bridged_below_a_continuum(monkeypatch):
         return np.sqrt(np.sum(np.abs(spec[flanks]) ** 2))
 
     assert notch_error(raised.theta) < 0.5 * notch_error(bridged.theta)
+
+
+def test_the_raised_notches_are_recorded_and_said(monkeypatch):
+    """The options record each notch raised (band, level); the terminal's line gives the RMS the level holds
+    over the notch; a frozen rerun with those options is the same filter (the record's key is not the method's)."""
+    import json
+
+    import xarray as xr
+
+    from reports.summary import notch_level_line
+
+    s0 = 1e-16
+    rng = np.random.default_rng(12)
+    theta = _white(s0, rng, top_hz=400.0)
+    d = _differentials(theta, rng, sd=3e-8)
+    monkeypatch.setattr(axis_integration, "NOTCH_RAISE", 2.0)
+    res = integrate_axis(d, list(TAUS), DT, method="wiener", highpass_hz=0.0)
+    raised = res.options["notch_levels"]
+    lo, hi, level = raised[0]
+    assert lo < 135.0 < hi and level == pytest.approx(float(np.median(
+        res.spectrum.psd[(res.spectrum.freq >= lo) & (res.spectrum.freq <= hi)])))
+    again = integrate_axis(d, list(TAUS), DT, method="wiener", options=res.frozen_options(), highpass_hz=0.0)
+    np.testing.assert_allclose(again.theta, res.theta, rtol=0, atol=1e-6 * np.nanstd(res.theta))
+    ifov = 4e-6
+    ds = xr.Dataset(attrs={"pixel_ifov_rad": ifov,
+                           "integration": json.dumps({"roll": {"options": {"notch_levels": raised}}})})
+    line = notch_level_line(ds, ["roll", "pitch"])
+    assert f"roll {lo:.1f}–{hi:.1f} Hz ({np.sqrt(2 * level * (hi - lo)) / ifov:.3f} px)" in line
+    assert notch_level_line(xr.Dataset(attrs={"integration": "{}"}), ["roll"]) is None
