@@ -508,7 +508,7 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
             "the limit (two sampling spreads) one of the two predictions is short by at least the excess, and the "
             "data cannot tell which; σ takes the images' share of it (restoration.sigma_knowledge_check), and the "
             "cell gives, in brackets, σ if the images' prediction is the short one.")
-    from .summary import notch_continuum_line_of_run, scene_offset_line_of_run
+    from .summary import notch_continuum_line_of_run, notch_level_line, scene_offset_line_of_run
 
     explained = (
         (scene_offset_line_of_run(run, list(unc)),
@@ -522,7 +522,12 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
          "bridges it from the notch's edge bins, the smaller one, so that a line's skirt does not raise it. "
          "Under a broadband continuum that bridge can fall to nothing while the pairs' flanks still see the "
          "jitter: the figure is the error the filter built on the bridge adds to the best the pairs allow were "
-         "the continuum at its sides' level (restore.observability.notch_continuum)."))
+         "the continuum at its sides' level (restore.observability.notch_continuum)."),
+        (notch_level_line(run.restoration, list(unc)),
+         ". Over its whole width a notch's flanks still see the attitude: its level, fitted there on what the MAP "
+         "left (restore.integration.spectrum.notch_levels), was detected above the bridge, and the prior took it "
+         "(restore.axis_integration._notch_prior). The filter gives back what the flanks see; the notch's middle, "
+         "which no pair sees, is in the unobservable part and in σ."))
     for line, why in explained:
         if line:
             text = line.strip()
