@@ -251,9 +251,9 @@ def notch_residual(res, measured, taus, dt: float, lags, prior: PriorSpectrum) -
         return None
     grid = np.asarray(grid, dtype=np.float64)
     m = grid.size
-    f = np.asarray(prior.freq, dtype=np.float64)
-    if f.size != m // 2 + 1:
-        return None
+    # the MAP's own grid, not the prior's: with per-line lags the grid is padded for the longest of them, and
+    # a prior estimated without lags was read onto it
+    f = np.fft.rfftfreq(m, dt)
     d = np.asarray(measured, dtype=np.float64)
     n = d.shape[1]
     field = grid
@@ -296,16 +296,22 @@ def _notch_prior(res, prior, spec, measured, taus, dt, opts, data, lags, details
 
     from .integration.spectrum import notch_levels
 
+    from .integration.spectrum import notch_mask
+
     resid = notch_residual(res, measured, taus, dt, lags, prior)
     if resid is None:
         return res, prior
+    m = np.asarray(res.theta_grid).size
     f = np.asarray(prior.freq, dtype=np.float64)
+    df = float(f[1] - f[0])
     psd = np.asarray(prior.psd, dtype=np.float64).copy()
+    # the prior's own notches (its grid may be shorter than the MAP's: see notch_residual)
+    poor = notch_mask(f, np.asarray(taus, dtype=np.float64), np.asarray(prior.noise_std, dtype=np.float64) ** 2 * dt)
     raised = []
-    for nl in notch_levels(resid, taus, dt, n_fft=2 * (f.size - 1), noise_std=prior.noise_std, low_hz=f[1]):
-        a, b = nl.bins
-        if nl.detected and nl.level > NOTCH_RAISE * float(np.median(psd[a:b])):
-            psd[a:b] = np.maximum(psd[a:b], nl.level)
+    for nl in notch_levels(resid, taus, dt, n_fft=m, noise_std=prior.noise_std, low_hz=1.0 / (m * dt)):
+        sel = poor & (f >= nl.band_hz[0] - df) & (f <= nl.band_hz[1] + df)
+        if nl.detected and sel.any() and nl.level > NOTCH_RAISE * float(np.median(psd[sel])):
+            psd[sel] = np.maximum(psd[sel], nl.level)
             raised.append([nl.band_hz[0], nl.band_hz[1], nl.level])
     if not raised:
         return res, prior
