@@ -294,9 +294,7 @@ def _notch_prior(res, prior, spec, measured, taus, dt, opts, data, lags, details
     """
     from dataclasses import replace
 
-    from .integration.spectrum import notch_levels
-
-    from .integration.spectrum import notch_mask
+    from .integration.spectrum import notch_levels, notch_mask
 
     resid = notch_residual(res, measured, taus, dt, lags, prior)
     if resid is None:
@@ -308,18 +306,17 @@ def _notch_prior(res, prior, spec, measured, taus, dt, opts, data, lags, details
     # the prior's own notches (its grid may be shorter than the MAP's: see notch_residual)
     poor = notch_mask(f, np.asarray(taus, dtype=np.float64), np.asarray(prior.noise_std, dtype=np.float64) ** 2 * dt)
     raised = []
-    for nl in notch_levels(resid, taus, dt, n_fft=m, noise_std=prior.noise_std, low_hz=1.0 / (m * dt)):
+    for nl in notch_levels(resid, taus, dt, n_fft=m, noise_std=prior.noise_std):
         sel = poor & (f >= nl.band_hz[0] - df) & (f <= nl.band_hz[1] + df)
         if nl.detected and sel.any() and nl.level > NOTCH_RAISE * float(np.median(psd[sel])):
             psd[sel] = np.maximum(psd[sel], nl.level)
             raised.append([nl.band_hz[0], nl.band_hz[1], nl.level])
     if not raised:
         return res, prior
-    opts["notch_levels"] = raised
     prior = replace(prior, psd=psd)
     kw = {} if lags is None else {"lags": lags}
-    fixed = {k: v for k, v in spec.frozen_options(opts, prior).items() if k != "notch_levels"}
-    res = integrate(measured, taus, dt, method=spec.name, **fixed, **data, **kw, **details)
+    res = integrate(measured, taus, dt, method=spec.name, **spec.frozen_options(opts, prior), **data, **kw, **details)
+    opts["notch_levels"] = raised
     return res, prior
 
 
@@ -490,11 +487,9 @@ def integrate_axis(diffs, taus, dt: float, *, method: str | None = None, options
                 res, prior = _with_blind_tone(res, prior, spec, diffs, measured, taus, dt, opts, data, lags, details)
             for _ in range(int(prior_passes) if len(taus) > 1 else 0):
                 res, prior = _prior_again(res, prior, spec, measured, taus, dt, opts, data, lags, details)
-        if len(taus) > 1:
-            if exact_lags:
-                res, prior = _notch_prior(res, prior, spec, measured, taus, dt, opts, data, lags, details)
-            else:
-                res, prior = _notch_prior(res, prior, spec, diffs, taus, dt, opts, data, None, details)
+        if len(taus) > 1:  # on the differentials and lags the last MAP ran on
+            res, prior = _notch_prior(res, prior, spec, measured if exact_lags else diffs, taus, dt, opts, data,
+                                      lags if exact_lags else None, details)
     elif exact_lags:
         res = integrate(measured, taus, dt, method=spec.name, **opts, **data, lags=lags, **details)
     else:
