@@ -13,6 +13,7 @@ import numpy as np
 
 from reports import bench_integration, bench_matching
 from reports.history import HISTORY_FILE, append_record, make_record
+from reports.matching_lock import matching_lock
 from reports.metrics import (
     CLEAR_LINE_MIN_FRACTION,
     attitude_errors,
@@ -473,12 +474,35 @@ def unmet_criteria(row: dict) -> list:
     return out
 
 
+def _matching_lock_row(run_dir: Path, res) -> dict:
+    """The worst pair's matching under the restored and the true attitude (:func:`reports.matching_lock.matching_lock`);
+    ``{"error": ...}`` when it cannot be measured (the row's accuracy stands without it)."""
+    try:
+        return matching_lock(read_product(run_dir), res, read_truth(run_dir)).as_dict()
+    except Exception as ex:  # a diagnostic: say why it is missing, keep the row
+        return {"error": f"{type(ex).__name__}: {ex}"}
+
+
+def matching_lock_line(m: dict) -> str | None:
+    """The robustness table's line for a row's ``matching`` entry (None without one)."""
+    if not m:
+        return None
+    if "error" in m:
+        return f"matching lock not measured: {m['error'][:160]}"
+    return (f"matching ({m['pair']}, the worst pair): {m['valid_restored'] * 100:.1f} % valid under the restored "
+            f"attitude, {m['valid_true'] * 100:.1f} % under the true one (lock {m['lock'] * 100:.1f} %, "
+            f"{m['lost'] * 100:.1f} % lost); residual shift {m['shift_rms_restored_px']:.3f} px RMS "
+            f"({m['shift_rms_true_px']:.3f} under the true attitude)")
+
+
 def bench_robustness(*, lines: int | None = None, overrides: dict | None = None) -> dict:
     """Render, restore and score every scenario of the stress suite (a failing one is recorded, not fatal).
 
     Per scenario: RMS and 99.7 % per restored axis [px], the AOCS knowledge's
     RMS, coverage, the unobservable part and the floor, the predicted RMS σ
-    and the ratio actual / predicted, the scenario's requirement and its verdict.
+    and the ratio actual / predicted, the scenario's requirement and its verdict,
+    and whether the worst pair's matching stays locked (``matching``:
+    :func:`reports.matching_lock.matching_lock`).
     """
     rows = []
     for name, path in stress_scenarios().items():
@@ -520,6 +544,7 @@ def bench_robustness(*, lines: int | None = None, overrides: dict | None = None)
                 row["without_yaw_coupling_rms_px"] = {a: e["errors"][a]["rms_px_without_yaw_coupling"] for a in coupled}
                 row["yaw_coupling"] = {a: e["errors"][a]["yaw_coupling"] for a in coupled}
             row["unmet"] = unmet_criteria(row)
+            row["matching"] = _matching_lock_row(Path(e["run_dir"]), res)
         except Exception as ex:  # one scenario failing must not sink the suite: say why in its row
             row["error"] = f"{type(ex).__name__}: {ex}"
         rows.append(row)
@@ -564,6 +589,9 @@ def _format_robustness(r: dict) -> list:
                  for a in ("roll", "pitch") if a in um and any(v >= 0.001 for v in um[a].values())]
         if parts:
             out.append(f"  {'':24s} measured unobservable parts (px RMS) — " + "; ".join(parts))
+        lock = matching_lock_line(row.get("matching"))
+        if lock:
+            out.append(f"  {'':24s} {lock}")
         for a, v in row.get("without_yaw_coupling_rms_px", {}).items():
             out.append(f"  {'':24s} {a} without the yaw seen as {a} ({row['yaw_coupling'][a]:.3f} × missed yaw): "
                        f"{v:.4f} px RMS")

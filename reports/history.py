@@ -50,7 +50,8 @@ def _lower_is_better(name: str) -> bool | None:
     if leaf.endswith(("rms_px", "p997_px", "rms_urad", "p997_urad", "_m")) or leaf in ("wall_s",) or \
             (leaf.endswith("_s") and not leaf.endswith("per_s")):
         return True
-    if leaf in ("coverage", "valid_fraction", "improvement_median", "nees_inside_fraction") or \
+    if leaf in ("coverage", "valid_fraction", "improvement_median", "nees_inside_fraction", "lock",
+                "valid_restored") or \
             leaf.endswith("per_s"):
         return False
     return None
@@ -77,6 +78,10 @@ def _run_figures(prefix: str, e: dict) -> dict:
         out[f"{prefix}{a}.coverage"] = float(v)
     if "restore_s" in e:
         out[prefix + "restore_s"] = float(e["restore_s"])
+    m = e.get("matching") or {}
+    for k in ("lock", "valid_restored"):   # the worst pair's matching (reports.matching_lock), when measured
+        if k in m and m[k] is not None and np.isfinite(m[k]):
+            out[f"{prefix}matching.{k}"] = float(m[k])
     return out
 
 

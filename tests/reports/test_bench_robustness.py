@@ -118,3 +118,20 @@ def test_overrides_are_refused_where_a_benchmark_does_not_take_them(monkeypatch,
         bench.run_bench("render", overrides={"acquisition": {"lines": 64}}, history=None)
     rc = simsat_cli.main(["bench", "matching", "--set", "restoration.noise_colour_weighting=true"])
     assert rc != 0 and "--set: only `simsat bench robustness / regression`" in capsys.readouterr().err
+
+
+def test_robustness_table_says_whether_matching_stays_locked():
+    from reports.bench import matching_lock_line
+
+    row = {"scenario": "large_amplitude", "errors": {a: {"rms_px": 0.02, "p997_px": 0.06, "knowledge_rms_px": 2.7}
+                                                     for a in ("roll", "pitch")},
+           "coverage": {"roll": 0.99, "pitch": 0.99}, "passed": True, "requirement_rms_px": 0.05,
+           "unobservable_rms_px": {"roll": 0.001, "pitch": 0.002}, "floor_rms_px": {"roll": 0.01, "pitch": 0.02},
+           "matching": {"pair": "B1/B2", "valid_restored": 0.7894, "valid_true": 0.7907, "lock": 0.9983,
+                        "lost": 0.0083, "shift_rms_restored_px": 0.6514, "shift_rms_true_px": 0.6515}}
+    text = "\n".join(_format_robustness({"rows": [row], "lines": None}))
+    assert "matching (B1/B2, the worst pair): 78.9 % valid under the restored attitude, 79.1 % under the true " \
+           "one (lock 99.8 %, 0.8 % lost)" in text
+    failed = matching_lock_line({"error": "ProductError: truth.nc missing"})
+    assert failed == "matching lock not measured: ProductError: truth.nc missing"
+    assert matching_lock_line(None) is None and matching_lock_line({}) is None

@@ -95,3 +95,16 @@ def test_cli_compare_exits_1_on_a_regression_and_names_it(tmp_path, capsys):
     h.write_text("garbage\n")
     assert main(["bench", "compare", "--history", str(h)]) == 2
     assert "line 1" in capsys.readouterr().err
+
+
+def test_robustness_rows_record_the_matching_lock_higher_is_better():
+    row = {"scenario": "large_amplitude", "errors": {"roll": {"rms_px": 0.02}},
+           "matching": {"pair": "B1/B2", "lock": 0.998, "valid_restored": 0.789, "valid_true": 0.791}}
+    figs = figures_of("robustness", {"rows": [row]})
+    assert figs["large_amplitude.matching.lock"] == 0.998
+    assert figs["large_amplitude.matching.valid_restored"] == 0.789
+    assert "large_amplitude.matching.valid_true" not in figs      # the images' own limit, not the algorithm's
+    assert figures_of("robustness", {"rows": [{**row, "matching": {"error": "ValueError: x"}}]}).keys() == \
+        {"large_amplitude.roll.rms_px"}
+    _, _, ch = compare([_record({"s.matching.lock": 0.99}), _record({"s.matching.lock": 0.90})])
+    assert ch[0].regression
