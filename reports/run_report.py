@@ -569,6 +569,9 @@ def _matches_section(pg: _Page, run: D.RunData):
         pg.table(["pair", "candidates", "valid", "inliers", "rejected by synthesis", "failed matching",
                   "gap lines"], rows)
         pg.para("Data (counts per bin): " + ", ".join(links), "files")
+        lock = D.matching_lock_sentence(D.matching_lock_of_run(run))
+        if lock:
+            pg.note(lock)
     _misregistration_part(pg, run)
 
 

@@ -43,6 +43,8 @@ from .headline import attitude_table, headline, restored_axes, scenario_summary
 from .loading import RunData, get_integrator, load_run, pair_file_tag
 from .matches import (
     match_density,
+    matching_lock_of_run,
+    matching_lock_sentence,
     misregistration_rows,
     misregistration_with_true_attitude,
 )
@@ -62,4 +64,4 @@ from .transfer import (
     welch_settings,
 )
 
-__all__ = ["AXES", "RunData", "load_run", "get_integrator", "pair_file_tag", "scenario_summary", "restored_axes", "attitude_table", "headline", "minmax_decimate", "longest_finite_run", "zoom_window", "welch_settings", "spectra", "frozen_chain_gain", "probe_window_gain", "integration_probe", "measured_transfer", "analytic_chain_gain", "analytic_joint_gain", "regularisation_k", "transfer_curves", "integration_record", "line_lags", "true_differentials", "measured_differentials", "axis_integration", "error_budget", "local_errors", "BUDGET_COMPONENTS", "match_density", "misregistration_rows", "misregistration_with_true_attitude", "scene_geometry", "uncertainty", "sigma_calibration"]
+__all__ = ["AXES", "RunData", "load_run", "get_integrator", "pair_file_tag", "scenario_summary", "restored_axes", "attitude_table", "headline", "minmax_decimate", "longest_finite_run", "zoom_window", "welch_settings", "spectra", "frozen_chain_gain", "probe_window_gain", "integration_probe", "measured_transfer", "analytic_chain_gain", "analytic_joint_gain", "regularisation_k", "transfer_curves", "integration_record", "line_lags", "true_differentials", "measured_differentials", "axis_integration", "error_budget", "local_errors", "BUDGET_COMPONENTS", "match_density", "matching_lock_of_run", "matching_lock_sentence", "misregistration_rows", "misregistration_with_true_attitude", "scene_geometry", "uncertainty", "sigma_calibration"]

@@ -12,7 +12,8 @@ from simsat.units import AXES
 from .headline import restored_axes
 from .loading import RunData
 
-__all__ = ['match_density', 'misregistration_rows', 'misregistration_with_true_attitude']
+__all__ = ['match_density', 'misregistration_rows', 'misregistration_with_true_attitude', 'matching_lock_of_run',
+           'matching_lock_sentence']
 
 
 def match_density(run: RunData, *, line_bins: int = 200, col_bins: int = 16, max_rejected_points: int = 3000,
@@ -155,3 +156,39 @@ def misregistration_with_true_attitude(run: RunData) -> dict:
         run.notes.append(f"misregistration with the true attitude not computed: {ex}")
     run._cache["true_attitude_floor"] = out
     return out
+
+
+def matching_lock_of_run(run: RunData):
+    """The worst pair matched again under the restored and the true attitude
+    (:func:`reports.matching_lock.matching_lock`); None without truth or a restoration with matches, or when it
+    cannot be computed (said in ``run.notes``)."""
+    if run.truth is None or run.result is None or not any(np.size(p.line_a) for p in run.result.pairs):
+        return None
+    if "matching_lock" in run._cache:
+        return run._cache["matching_lock"]
+    from reports.matching_lock import matching_lock
+
+    out = None
+    try:
+        out = matching_lock(run.product, run.result, run.truth)   # the run's product: no second handle on the file
+    except (ProductError, KeyError, ValueError, OSError) as ex:
+        run.notes.append(f"matching under the true attitude not computed: {ex}")
+    run._cache["matching_lock"] = out
+    return out
+
+
+def matching_lock_sentence(lock) -> str | None:
+    """The report's sentence on a :class:`reports.matching_lock.MatchingLock` (None: nothing to say)."""
+    if lock is None or not lock.valid_true > 0:
+        return None
+    verdict = ("the restoration finds what the images allow" if lock.lock >= 0.98 else
+               "the restoration loses matches the true geometry keeps: its geometry is off by more than the "
+               "search absorbs (a wider restoration.rematch_search_lines / _columns, or another restoration.rematch pass, may find them)")
+    return (f"With truth: the worst pair, {lock.pair}, matched again as the last pass matches (band B resampled "
+            f"into band A's geometry) finds {lock.valid_restored * 100:.1f} % of its {lock.points} points valid "
+            f"under the restored attitude and {lock.valid_true * 100:.1f} % under the true one (lock "
+            f"{lock.lock * 100:.1f} %, {lock.lost * 100:.1f} % of the points lost): {verdict}. The points that fail "
+            f"under the true attitude fail on the images themselves (the bands' textures differ, weak texture, "
+            f"noise); their valid ones are off by {lock.shift_rms_true_px:.2f} px RMS, the matching's own error "
+            f"({lock.shift_rms_restored_px:.2f} px under the restored attitude).")
+

@@ -60,3 +60,18 @@ def test_unrestored_lines_take_the_knowledge_and_bad_pairs_are_named(tiny):
         assert (~ok[:50]).all() and np.isfinite(att[a]).all()
     with pytest.raises(ValueError, match="no pair 'B9/B1'.*B1/B0"):
         matching_lock(product, res, truth, pair="B9/B1")
+
+
+def test_the_report_sentence_says_whether_the_restoration_finds_what_the_images_allow():
+    from reports.matching_lock import MatchingLock
+    from reports.report_data import matching_lock_sentence
+
+    good = MatchingLock(pair="B1/B2", points=86966, valid_stored=0.79, valid_restored=0.793, valid_true=0.802,
+                        lost=0.015, shift_rms_restored_px=0.62, shift_rms_true_px=0.61)
+    text = matching_lock_sentence(good)
+    assert "B1/B2" in text and "79.3 %" in text and "80.2 %" in text and "lock 98.9 %" in text
+    assert "finds what the images allow" in text and "0.61 px RMS" in text
+    bad = dataclasses.replace(good, valid_restored=0.5, lost=0.3)
+    assert "loses matches the true geometry keeps" in matching_lock_sentence(bad)
+    assert matching_lock_sentence(dataclasses.replace(good, valid_true=0.0)) is None
+    assert matching_lock_sentence(None) is None
