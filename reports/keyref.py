@@ -142,6 +142,7 @@ MEANING = {
     "restoration.min_quality": "correlation below which a match is rejected",
     "restoration.axes": "axes fitted by the instant synthesis",
     "restoration.n_sigma": "outlier rejection threshold [σ]",
+    "restoration.match_covariance": "weigh each match in the instant synthesis by the inverse of its 2 × 2 covariance (the matcher's line and column σ and their correlation: on an edge or an oriented texture a slide along the edge moves both coordinates together), not by two independent variances",
     "restoration.line_weighting": "weigh each line of a pair by how the fit residual grows with what makes its matches worse — the along-track stretch of band B's window against A's (|dλ/dl|: where the lag changes fast) and the closeness to a gap (cloud, water, no texture) — learnt from the data (monotone in each), and integrate again",
     "restoration.transient_factor": "where the fit of the estimated (stationary) prior misses the data by more than this many times its record median over 100 lines — an abrupt onset it cannot follow — and the estimate without prior (least squares) fits them, that estimate is blended in over the window (0: off)",
     "restoration.despike_sigma": "a line whose synthesised differential departs from what the integrated attitude predicts by more than this many robust σ, its neighbours not, is a failed synthesis: dropped and filled (0: off)",

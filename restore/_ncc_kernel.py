@@ -563,18 +563,21 @@ def _match_one(image_a, image_b, la, ca, pl, pc, h, w, sl, sc, order, max_iter, 
     out[3] = flags
     out[4] = std_l
     out[5] = std_c
+    # correlation of the line and column errors: the normal matrix's inverse, gain projected out (an
+    # oriented texture, an edge, couples them: the aperture problem)
+    out[6] = 0.0 if singular or not (i11 > 0 and i22 > 0) else i12 / math.sqrt(i11 * i22)
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
 def match_ncc(image_a, image_b, la, ca, pl, pc, h, w, sl, sc, order, max_iter, tol, min_quality, max_std, corr):
-    """Match every point; returns an (N, 6) array of line_b, col_b, quality, flags, std_l, std_c.
+    """Match every point; returns an (N, 7) array of line_b, col_b, quality, flags, std_l, std_c, corr_lc.
 
     ``corr``: :func:`restore.matching.polynomial_correction` of ``order`` (B's interpolation weights).
 
     ``max_std <= 0`` means no precision requirement.
     """
     n = la.shape[0]
-    out = np.empty((n, 6))
+    out = np.empty((n, 7))
     n_blocks = (n + _BLOCK - 1) // _BLOCK
     g = _G
     sk = np.empty(2 * order + 1)  # Lanczos tap tables

@@ -36,12 +36,12 @@ import numpy as np
 
 from simsat.units import AXES
 
-from .synthesis import instant_synthesis, window_compensation
+from .synthesis import MATCH_STD_FLOOR_PX, instant_synthesis, match_weights, window_compensation
 
 __all__ = ["interleaved_halves", "balance_scale", "local_matching_error"]
 
 #: weight floor on each matched coordinate's σ [px], as the pipeline's synthesis (restore.stages.synthesise_pair)
-STD_FLOOR_PX = 0.02
+STD_FLOOR_PX = MATCH_STD_FLOOR_PX
 
 
 def interleaved_halves(columns, block_columns: int) -> np.ndarray:
@@ -84,7 +84,7 @@ def balance_scale(sigma_a, sigma_b) -> np.ndarray:
 
 
 def local_matching_error(pair, sensitivities, *, n_lines: int, axes=AXES, block_columns: int, min_points: int = 2,
-                         n_sigma: float = 3.0, window_lines: int = 0) -> np.ndarray:
+                         n_sigma: float = 3.0, window_lines: int = 0, covariance: bool = True) -> np.ndarray:
     """The difference of the differentials fitted from two interleaved halves of a pair's points, scaled to the
     full fit's local error (:func:`balance_scale`: ½ for equal halves).
 
@@ -107,6 +107,9 @@ def local_matching_error(pair, sensitivities, *, n_lines: int, axes=AXES, block_
         Outlier rejection of the synthesis.
     window_lines : int
         The matching window's height when the pipeline compensated its averaging (0: not compensated).
+    covariance : bool
+        Weigh the points by their 2 × 2 covariance, as the pipeline's synthesis does with
+        ``restoration.match_covariance`` (:func:`restore.synthesis.match_weights`).
 
     Returns
     -------
@@ -123,16 +126,13 @@ def local_matching_error(pair, sensitivities, *, n_lines: int, axes=AXES, block_
     la, ca = np.asarray(pair.line_a)[v], np.asarray(pair.col_a)[v]
     rl = (np.asarray(pair.meas_line_b) - np.asarray(pair.pred_line_b))[v]
     rc = (np.asarray(pair.meas_col_b) - np.asarray(pair.pred_col_b))[v]
-    if pair.std_line is not None:
-        w = np.stack([1.0 / (np.asarray(pair.std_line)[v] ** 2 + STD_FLOOR_PX ** 2),
-                      1.0 / (np.asarray(pair.std_col)[v] ** 2 + STD_FLOOR_PX ** 2)], axis=1)
-    else:
-        w = np.clip(np.asarray(pair.quality)[v], 0.05, 1.0) ** 2
+    w, rho = match_weights(pair, v, covariance=covariance)
     half = _halves_balanced(ca, block_columns)
     if half is None:
         return np.full((n_lines, len(AXES)), np.nan)
     fits = [instant_synthesis(np.rint(la[m]).astype(np.int64), rl[m], rc[m], sens[m], n_lines=n_lines,
-                              weights=w[m], axes=axes, min_points=min_points, n_sigma=n_sigma) for m in (half, ~half)]
+                              weights=w[m], correlation=None if rho is None else rho[m], axes=axes,
+                              min_points=min_points, n_sigma=n_sigma) for m in (half, ~half)]
     out = (fits[0].diff - fits[1].diff) * balance_scale(fits[0].sigma, fits[1].sigma)
     if window_lines > 1:
         out = np.stack([window_compensation(out[:, k], window_lines=window_lines) for k in range(out.shape[1])],

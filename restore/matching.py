@@ -146,6 +146,14 @@ class MatchResult:
         ``"ncc"`` between identical bands, optimistic across bands (the band
         difference is not white) and for ``"phase"`` (less efficient on
         3-line windows), by up to a factor 1.5-2.
+    corr_line_col : ndarray of float, shape (N,)
+        Correlation of the line and column errors, from the same normal
+        matrix (its inverse, the gain projected out): near ±1 on an edge or
+        an oriented texture, where a slide along the edge moves both
+        coordinates together (the aperture problem); 0 where the normal
+        matrix is singular. A weighted fit that takes it (the 2 × 2
+        covariance of each point) does not read an along-edge slide as
+        two independent measurements.
     """
 
     line_b: np.ndarray
@@ -155,6 +163,7 @@ class MatchResult:
     flags: np.ndarray
     std_line: np.ndarray
     std_col: np.ndarray
+    corr_line_col: np.ndarray
 
     def __len__(self) -> int:
         return int(self.line_b.shape[0])
@@ -576,7 +585,7 @@ def match_points(
     if n == 0:
         f, i = np.zeros(0), np.zeros(0, dtype=np.int64)
         return MatchResult(line_b=f, col_b=f.copy(), quality=f.copy(), valid=np.zeros(0, dtype=bool),
-                           flags=i, std_line=f.copy(), std_col=f.copy())
+                           flags=i, std_line=f.copy(), std_col=f.copy(), corr_line_col=f.copy())
     if spec.compiled and backend != "numpy":
         return _match_compiled(*images, *pts, h=h, w=w, sl=sl, sc=sc, min_quality=float(min_quality),
                                max_std=max_std, order=int(order), max_iter=int(max_iter), tol=float(tol))
@@ -608,7 +617,8 @@ def _match_compiled(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, min_quali
                         polynomial_correction(order, exact_degree_for(order)))
     flags = out[:, 3].astype(np.int64)
     return MatchResult(line_b=out[:, 0].copy(), col_b=out[:, 1].copy(), quality=out[:, 2].copy(), valid=flags == 0,
-                       flags=flags, std_line=out[:, 4].copy(), std_col=out[:, 5].copy())
+                       flags=flags, std_line=out[:, 4].copy(), std_col=out[:, 5].copy(),
+                       corr_line_col=out[:, 6].copy())
 
 
 # ---------------------------------------------------------------------------
@@ -669,7 +679,16 @@ def _match_chunk(image_a, image_b, la, ca, pl, pc, *, h, w, sl, sc, method, min_
     return {
         "line_b": win.c0_l + off_l + (la - win.ra_l), "col_b": win.c0_c + off_c + (ca - win.ra_c),
         "quality": quality, "valid": flags == 0, "flags": flags, "std_line": std_l, "std_col": std_c,
+        "corr_line_col": _line_col_correlation(ninv, singular),
     }
+
+
+def _line_col_correlation(ninv, singular) -> np.ndarray:
+    """Correlation of the line and column errors from the inverse normal matrices (N, 3, 3); 0 where singular."""
+    i11, i22, i12 = ninv[:, 1, 1], ninv[:, 2, 2], ninv[:, 1, 2]
+    ok = ~np.asarray(singular, dtype=bool) & (i11 > 0) & (i22 > 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(ok, i12 / np.sqrt(np.where(ok, i11 * i22, 1.0)), 0.0)
 
 
 @dataclass

@@ -167,5 +167,6 @@ def rematch_pair(pair: PairData, image_a: np.ndarray, image_b: np.ndarray, sm, *
     lb, cb = map_back(ml, mc, m.line_b, m.col_b, window_lines=window[0])
     valid = np.asarray(m.valid, bool) & np.isfinite(lb) & np.isfinite(cb)
     return replace(pair, meas_line_b=lb, meas_col_b=cb, quality=np.asarray(m.quality, float), valid=valid,
-                   std_line=np.asarray(m.std_line, float), std_col=np.asarray(m.std_col, float), pred_line_b=None,
+                   std_line=np.asarray(m.std_line, float), std_col=np.asarray(m.std_col, float),
+                   corr_line_col=np.asarray(m.corr_line_col, float), pred_line_b=None,
                    pred_col_b=None, inlier=None, synthesis=None)

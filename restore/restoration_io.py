@@ -122,7 +122,7 @@ def check_restoration(ds, path: str | Path, *, product_time: np.ndarray) -> list
 
 # --------------------------------------------------------------------------- writer
 _MATCH_FIELDS = ("line_a", "col_a", "meas_line_b", "meas_col_b", "pred_line_b", "pred_col_b", "quality", "std_line",
-                 "std_col")
+                 "std_col", "corr_line_col")
 
 
 def _match_variables(pairs: list) -> dict:
@@ -140,7 +140,8 @@ def _match_variables(pairs: list) -> dict:
     data["match_pair"] = ("match", np.concatenate(mp) if mp else np.zeros(0, np.int16))
     for k, v in cols.items():
         attrs = ({"units": "1", "long_name": "normalised correlation of the match"} if k == "quality"
-                 else {"units": "px"})
+                 else {"units": "1", "long_name": "correlation of the match's line and column errors"}
+                 if k == "corr_line_col" else {"units": "px"})
         data[f"match_{k}"] = ("match", np.concatenate(v) if v else np.zeros(0), attrs)
     data["match_valid"] = ("match", np.concatenate(valid).astype(np.int8))
     data["match_inlier"] = ("match", np.concatenate(inl).astype(np.int8))
@@ -293,7 +294,7 @@ def _pairs_from(ds) -> list[PairData]:
                             line_a=f["line_a"], col_a=f["col_a"], meas_line_b=f["meas_line_b"],
                             meas_col_b=f["meas_col_b"], quality=f["quality"], valid=valid,
                             pred_line_b=f["pred_line_b"], pred_col_b=f["pred_col_b"], inlier=inl,
-                            std_line=f["std_line"], std_col=f["std_col"],
+                            std_line=f["std_line"], std_col=f["std_col"], corr_line_col=f["corr_line_col"],
                             nominal_tau_s=None if nom is None or not np.isfinite(nom[j]) else float(nom[j]),
                             residual_rms_px=float("nan") if rms is None else float(rms[j])))
     return out

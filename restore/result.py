@@ -47,6 +47,8 @@ class PairData:
     std_col: np.ndarray | None = None
     nominal_tau_s: float | None = None
     residual_rms_px: float = float("nan")
+    #: correlation of each match's line and column errors (:attr:`restore.matching.MatchResult.corr_line_col`)
+    corr_line_col: np.ndarray | None = None
 
 
 @dataclass

@@ -39,6 +39,7 @@ class RestorationSettings:
     despike_sigma: float = 10.0
     transient_factor: float = 4.0
     line_weighting: bool = True
+    match_covariance: bool = True
     min_points_per_line: int = 3
     highpass_hz: float | str = "auto"
     max_gap_fill_lines: int = 8
@@ -143,6 +144,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.despike_sigma = sec.number("despike_sigma", s.despike_sigma, ge=0)
     s.transient_factor = sec.number("transient_factor", s.transient_factor, ge=0)
     s.line_weighting = sec.boolean("line_weighting", s.line_weighting)
+    s.match_covariance = sec.boolean("match_covariance", s.match_covariance)
     s.min_points_per_line = sec.integer("min_points_per_line", s.min_points_per_line, ge=2)
     s.highpass_hz = sec.number_or("highpass_hz", "auto", ge=0, le=1e4)
     s.max_gap_fill_lines = sec.integer("max_gap_fill_lines", s.max_gap_fill_lines, ge=0)

@@ -44,6 +44,7 @@ from .synthesis import (
     fill_short_gaps,
     highpass_nan,
     instant_synthesis,
+    match_weights,
     spikes,
     window_compensation,
 )
@@ -261,7 +262,7 @@ def match_candidates(img_a: np.ndarray, img_b: np.ndarray, cand: Candidates, set
                     col_a=cols_a, meas_line_b=m.line_b, meas_col_b=m.col_b, quality=m.quality,
                     valid=np.asarray(m.valid, bool), pred_line_b=pl, pred_col_b=pc,
                     std_line=np.asarray(m.std_line, float), std_col=np.asarray(m.std_col, float),
-                    nominal_tau_s=cand.nominal_tau_s)
+                    corr_line_col=np.asarray(m.corr_line_col, float), nominal_tau_s=cand.nominal_tau_s)
 
 
 def match_pair(product: Product, ahead: str, behind: str, settings: RestorationSettings, sm=None) -> PairData:
@@ -356,15 +357,10 @@ def synthesise_pair(pair: PairData, sm, settings: RestorationSettings, n_lines: 
     pred_l = np.full(v.shape, np.nan)
     pred_c = np.full(v.shape, np.nan)
     pred_l[v], pred_c[v] = pl, pc
-    if pair.std_line is not None:
-        # inverse variance of each matched coordinate (matcher's estimate, floored)
-        floor = 0.02
-        w = np.stack([1.0 / (pair.std_line[v] ** 2 + floor ** 2), 1.0 / (pair.std_col[v] ** 2 + floor ** 2)], axis=1)
-    else:
-        w = np.clip(pair.quality[v], 0.05, 1.0) ** 2
+    w, rho = match_weights(pair, v, covariance=settings.match_covariance)
     res = instant_synthesis(np.rint(la).astype(np.int64), pair.meas_line_b[v] - pl, pair.meas_col_b[v] - pc, sens,
-                            n_lines=n_lines, weights=w, axes=settings.axes, min_points=settings.min_points_per_line,
-                            n_sigma=settings.n_sigma)
+                            n_lines=n_lines, weights=w, correlation=rho, axes=settings.axes,
+                            min_points=settings.min_points_per_line, n_sigma=settings.n_sigma)
     inl = np.zeros(v.shape, dtype=bool)
     inl[v] = res.inlier
     tau_pts = (pl - la) * sm.instrument.line_period_s
@@ -1037,7 +1033,8 @@ def local_errors(pairs: list, settings: RestorationSettings, n_lines: int) -> di
                                            block_columns=2 * int(settings.window[1]),
                                            min_points=max(2, settings.min_points_per_line // 2),
                                            n_sigma=settings.n_sigma,
-                                           window_lines=settings.window[0] if settings.compensate_window else 0)
+                                           window_lines=settings.window[0] if settings.compensate_window else 0,
+                                           covariance=settings.match_covariance)
     return out
 
 

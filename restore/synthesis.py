@@ -21,9 +21,31 @@ import numpy as np
 
 from simsat.units import AXES
 
-__all__ = ["SynthesisResult", "instant_synthesis", "highpass_nan", "highpass_gain", "fill_short_gaps",
+__all__ = ["SynthesisResult", "instant_synthesis", "match_weights", "MATCH_STD_FLOOR_PX", "highpass_nan", "highpass_gain", "fill_short_gaps",
            "window_compensation", "spikes", "lowpass_sigma_lines"]
 
+
+
+#: floor on each matched coordinate's σ in the synthesis's weights [px] (the matcher's σ is optimistic across bands)
+MATCH_STD_FLOOR_PX = 0.02
+
+
+def match_weights(pair, v: np.ndarray, *, covariance: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(weights (n, 2), correlation (n,) or None)`` of the points ``v`` of ``pair`` for
+    :func:`restore.synthesis.instant_synthesis`: the inverse variance of each matched coordinate (the matcher's
+    σ, floored at :data:`MATCH_STD_FLOOR_PX`) and, with ``covariance`` and the matcher's
+    :attr:`~restore.result.PairData.corr_line_col`, the correlation of the line and column errors under the same
+    floor (the floor is independent noise: it adds to the variances, not to the covariance). Without the
+    matcher's σ: the squared quality, the same on both coordinates."""
+    if pair.std_line is None:
+        return np.clip(pair.quality[v], 0.05, 1.0) ** 2, None
+    sl, sc = np.asarray(pair.std_line, dtype=np.float64)[v], np.asarray(pair.std_col, dtype=np.float64)[v]
+    var_l, var_c = sl ** 2 + MATCH_STD_FLOOR_PX ** 2, sc ** 2 + MATCH_STD_FLOOR_PX ** 2
+    w = np.stack([1.0 / var_l, 1.0 / var_c], axis=1)
+    if not covariance or pair.corr_line_col is None:
+        return w, None
+    rho = np.nan_to_num(np.asarray(pair.corr_line_col, dtype=np.float64)[v]) * sl * sc / np.sqrt(var_l * var_c)
+    return w, np.where(np.isfinite(rho), rho, 0.0)
 
 
 @dataclass
@@ -52,26 +74,47 @@ class SynthesisResult:
     fitted_axes: tuple
 
 
-def _accumulate(lines, rows_l, rows_c, res_l, res_c, w, n_lines, k):
+def _accumulate(lines, rows_l, rows_c, res_l, res_c, w, n_lines, k, w_lc=None):
     """Per-line normal matrices (n_lines, k, k) and right-hand sides (n_lines, k).
 
-    ``w`` is (n, 2): weights of the line and column equations of each point.
+    ``w`` is (n, 2): the diagonal of each point's 2 × 2 weight matrix (the line and column equations);
+    ``w_lc`` (n,), optional: its off-diagonal term (the inverse covariance of correlated line and column errors).
     """
     nm = np.zeros((n_lines, k, k))
     rhs = np.zeros((n_lines, k))
     wl, wc = w[:, 0], w[:, 1]
     for a in range(k):
-        rhs[:, a] = np.bincount(lines, wl * rows_l[:, a] * res_l + wc * rows_c[:, a] * res_c, minlength=n_lines)
+        r = wl * rows_l[:, a] * res_l + wc * rows_c[:, a] * res_c
+        if w_lc is not None:
+            r = r + w_lc * (rows_l[:, a] * res_c + rows_c[:, a] * res_l)
+        rhs[:, a] = np.bincount(lines, r, minlength=n_lines)
         for b in range(a, k):
-            v = np.bincount(lines, wl * rows_l[:, a] * rows_l[:, b] + wc * rows_c[:, a] * rows_c[:, b],
-                            minlength=n_lines)
+            q = wl * rows_l[:, a] * rows_l[:, b] + wc * rows_c[:, a] * rows_c[:, b]
+            if w_lc is not None:
+                q = q + w_lc * (rows_l[:, a] * rows_c[:, b] + rows_c[:, a] * rows_l[:, b])
+            v = np.bincount(lines, q, minlength=n_lines)
             nm[:, a, b] = v
             nm[:, b, a] = v
     return nm, rhs
 
 
+#: largest |correlation| of a point's line and column errors the fit takes (its weight matrix stays invertible)
+MAX_LINE_COL_CORRELATION = 0.99
+
+
+def _weight_matrices(w: np.ndarray, correlation) -> tuple[np.ndarray, np.ndarray | None]:
+    """(diagonal (n, 2), off-diagonal (n,) or None) of each point's 2 × 2 weight matrix: the inverse of the
+    covariance ``[[1/w_l, ρ/√(w_l w_c)], [ρ/√(w_l w_c), 1/w_c]]``."""
+    if correlation is None:
+        return w, None
+    rho = np.clip(np.nan_to_num(np.asarray(correlation, dtype=np.float64)), -MAX_LINE_COL_CORRELATION,
+                  MAX_LINE_COL_CORRELATION)
+    k = 1.0 / (1.0 - rho * rho)
+    return w * k[:, None], -rho * np.sqrt(w[:, 0] * w[:, 1]) * k
+
+
 def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *, n_lines: int, weights=None,
-                      axes=AXES, min_points: int = 4, n_sigma: float = 3.0, max_iter: int = 5,
+                      correlation=None, axes=AXES, min_points: int = 4, n_sigma: float = 3.0, max_iter: int = 5,
                       sigma_floor_px: float = 1e-4) -> SynthesisResult:
     """Fit attitude differentials per line from point residuals.
 
@@ -88,6 +131,15 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
     weights : array (n,) or (n, 2), optional
         Match-quality weights (default 1); with shape (n, 2), separate weights
         of the line and column equations (e.g. 1/σ² of each matched coordinate).
+    correlation : array (n,), optional
+        Correlation of each point's line and column errors (the matcher's
+        :attr:`~restore.matching.MatchResult.corr_line_col`, with the same
+        variances as ``weights``): the fit weighs each point by the inverse
+        of its 2 × 2 covariance (generalised least squares), so that a match
+        on an edge, whose slide along the edge moves both coordinates
+        together, counts once across the edge and hardly along it. None:
+        independent line and column errors. The outlier test keeps each
+        coordinate's marginal standardised residual.
     axes : sequence of str
         Axes to fit (subset of roll, pitch, yaw); the others are reported as NaN.
     min_points : int
@@ -104,6 +156,9 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
     """
     lines, rl, rc, s, w, ok, idx = _checked_inputs(lines, residual_lines, residual_columns, sensitivities,
                                                    weights, axes, min_points, n_lines)
+    if correlation is not None and np.shape(correlation) != (lines.size,):
+        raise ValueError(f"correlation: expected shape ({lines.size},), got {np.shape(correlation)}")
+    w_fit, w_lc = _weight_matrices(w, correlation)
     k = len(idx)
     # scale unknowns to µrad-ish magnitude for conditioning
     scale = 1e-6
@@ -118,7 +173,8 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
     for it in range(max_iter + 1):
         li = np.where(inl, lines, 0)
         nm, rhs = _accumulate(li, rows_l, rows_c, np.where(inl, rl, 0.0), np.where(inl, rc, 0.0),
-                              np.where(inl[:, None], w, 0.0), n_lines, k)
+                              np.where(inl[:, None], w_fit, 0.0), n_lines, k,
+                              None if w_lc is None else np.where(inl, w_lc, 0.0))
         npts = np.bincount(li[inl], minlength=n_lines)
         x = _solve_lines(nm, rhs, npts >= min_points, n_lines, k)
         # residuals of every point against its line's fit
@@ -142,7 +198,7 @@ def instant_synthesis(lines, residual_lines, residual_columns, sensitivities, *,
         if np.array_equal(new, inl):
             break
         inl = new
-    cov_diag = _formal_sigma(x, inl, lines, rows_l, rows_c, w, sig_l, sig_c, n_lines)
+    cov_diag = _formal_sigma(x, inl, lines, rows_l, rows_c, w_fit, sig_l, sig_c, n_lines, w_lc)
     diff = np.full((n_lines, 3), np.nan)
     sigma = np.full((n_lines, 3), np.nan)
     diff[:, idx] = x * scale
@@ -197,14 +253,15 @@ def _robust_sigma(z: np.ndarray, floor: float) -> float:
     return max(1.4826 * np.median(np.abs(z - np.median(z))), floor)
 
 
-def _formal_sigma(x, inl, lines, rows_l, rows_c, w, sig_l, sig_c, n_lines: int) -> np.ndarray:
+def _formal_sigma(x, inl, lines, rows_l, rows_c, w, sig_l, sig_c, n_lines: int, w_lc=None) -> np.ndarray:
     """Formal 1-σ of each line's unknowns: diag((Nm)⁻¹) scaled by the residual variance (weights are relative)."""
     n, k = lines.size, x.shape[1]
     cov_diag = np.full((n_lines, k), np.nan)
     good = np.all(np.isfinite(x), axis=1)
     if good.any():
         nm, _ = _accumulate(np.where(inl, lines, 0), rows_l, rows_c, np.zeros(n), np.zeros(n),
-                            np.where(inl[:, None], w, 0.0), n_lines, k)
+                            np.where(inl[:, None], w, 0.0), n_lines, k,
+                            None if w_lc is None else np.where(inl, w_lc, 0.0))
         s2 = 0.5 * (sig_l ** 2 + sig_c ** 2)
         inv = np.linalg.inv(nm[good])
         cov_diag[good] = np.sqrt(np.maximum(np.einsum("nii->ni", inv), 0) * s2)

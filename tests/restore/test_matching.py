@@ -265,6 +265,43 @@ def test_compiled_kernel_agrees_with_numpy_reference(window, search, order, case
     assert np.max(np.abs(rc.quality - rn.quality)[both]) < 1e-4
     assert np.allclose(rc.std_line[both], rn.std_line[both], rtol=1e-2)
     assert np.allclose(rc.std_col[both], rn.std_col[both], rtol=1e-2)
+    assert np.max(np.abs(rc.corr_line_col - rn.corr_line_col)[both]) < 1e-2
+
+
+def test_line_col_correlation_of_an_edge_follows_its_orientation():
+    """An oriented edge: sliding along it moves line and column together. The normal matrix's 2 × 2 part is the
+    window's structure tensor ``[[Σ gl², Σ gl gc], [Σ gl gc, Σ gc²]]``, so the errors' correlation is
+    ``−Σ gl gc / √(Σ gl² Σ gc²)`` (the gain column projected out: a window whose mean gradient is ~0 barely
+    changes it); an isotropic texture leaves it small."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(3)
+    n = 160
+    yy, xx = np.mgrid[0:n, 0:n].astype(float)
+    weak = ndimage.gaussian_filter(rng.standard_normal((n, n)), 1.5)
+    for phi in (0.3, 1.0, -0.6):
+        img = 3 * np.tanh((xx * np.cos(phi) + yy * np.sin(phi) - 80 * (np.cos(phi) + np.sin(phi))) / 2.0) + 0.05 * weak
+        b = ndimage.shift(img, (0.2, -0.3), order=5)
+        # points on the edge line
+        t = np.linspace(-25, 25, 11)
+        lc, cc = 80 + t * np.cos(phi), 80 - t * np.sin(phi)
+        la, ca = np.rint(lc), np.rint(cc)
+        r = match_points(img, b, la, ca, la + 0.2, ca - 0.3, window=(7, 31), search=(1, 1), min_quality=0.5)
+        gl = ndimage.correlate1d(img, np.array([1.0, -8.0, 0.0, 8.0, -1.0]) / 12.0, axis=0)
+        gc = ndimage.correlate1d(img, np.array([1.0, -8.0, 0.0, 8.0, -1.0]) / 12.0, axis=1)
+        box = lambda x: ndimage.uniform_filter(x, size=(7, 31))
+        jll, jcc, jlc = box(gl * gl), box(gc * gc), box(gl * gc)
+        li, ci = la.astype(int), ca.astype(int)
+        expected = -jlc[li, ci] / np.sqrt(jll[li, ci] * jcc[li, ci])
+        v = r.valid
+        assert v.mean() >= 0.8
+        np.testing.assert_allclose(r.corr_line_col[v], expected[v], atol=0.05)
+        assert np.all(np.abs(r.corr_line_col[v]) > 0.9)
+        assert np.all(np.sign(r.corr_line_col[v]) == -np.sign(np.sin(2 * phi)))
+    iso = ndimage.gaussian_filter(rng.standard_normal((n, n)), 1.5)
+    r = match_points(iso, ndimage.shift(iso, (0.2, -0.3), order=5), np.full(30, 80.0), np.linspace(40, 120, 30),
+                     np.full(30, 80.2), np.linspace(40, 120, 30) - 0.3, window=(7, 31), search=(1, 1))
+    assert np.median(np.abs(r.corr_line_col[r.valid])) < 0.3
 
 
 def test_compiled_kernel_same_bytes_on_any_thread_count(cross):

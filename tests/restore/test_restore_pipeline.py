@@ -38,6 +38,11 @@ def test_restoration_file_has_the_documented_content(tiny_restored):
     assert set(ds["pair"].values) == {"B1/B0", "B0/B2", "B1/B2"}
     assert ds["diff_roll"].dims == ("pair", "time")
     assert ds.sizes["match"] > 1000
+    corr = ds["match_corr_line_col"].values[ds["match_valid"].values.astype(bool)]
+    assert np.all(np.abs(corr) <= 1.0) and np.std(corr) > 0.05       # the matcher's line / column correlation
+    from restore.restoration_io import read_restoration
+    back = read_restoration(d / "restoration.nc").pairs[0]
+    assert back.corr_line_col is not None and back.corr_line_col.shape == back.line_a.shape
     assert 0.8 < ds.attrs["coverage_roll"] <= 1.0
     assert (d / "corrected.nc").exists()
 
