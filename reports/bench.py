@@ -474,11 +474,11 @@ def unmet_criteria(row: dict) -> list:
     return out
 
 
-def _matching_lock_row(run_dir: Path, res) -> dict:
+def _matching_lock_row(product, res, run_dir: Path) -> dict:
     """The worst pair's matching under the restored and the true attitude (:func:`reports.matching_lock.matching_lock`);
     ``{"error": ...}`` when it cannot be measured (the row's accuracy stands without it)."""
     try:
-        return matching_lock(read_product(run_dir), res, read_truth(run_dir)).as_dict()
+        return matching_lock(product, res, read_truth(run_dir)).as_dict()
     except Exception as ex:  # a diagnostic: say why it is missing, keep the row
         return {"error": f"{type(ex).__name__}: {ex}"}
 
@@ -534,7 +534,8 @@ def bench_robustness(*, lines: int | None = None, overrides: dict | None = None)
             pred = {a: res.detrended_rms.get(a, np.nan) / px for a in axes if a in res.sigma}
             row["predicted_detrended_rms_px"] = pred
             row["actual_over_predicted"] = {a: split[a].get("detrended_rms", np.nan) / px / pred[a] for a in pred}
-            clear = clear_line_fraction(read_product(e["run_dir"]), scenario.texture())
+            product = read_product(e["run_dir"])
+            clear = clear_line_fraction(product, scenario.texture())
             known = not np.all(np.isnan(clear))       # an orthoimage does not know its land cover
             row["clear_lines"] = float(np.mean(clear >= CLEAR_LINE_MIN_FRACTION)) if known else float("nan")
             row["coverage_of_clear_lines"] = {a: clear_line_coverage(res.restored[a], clear) if known
@@ -544,7 +545,7 @@ def bench_robustness(*, lines: int | None = None, overrides: dict | None = None)
                 row["without_yaw_coupling_rms_px"] = {a: e["errors"][a]["rms_px_without_yaw_coupling"] for a in coupled}
                 row["yaw_coupling"] = {a: e["errors"][a]["yaw_coupling"] for a in coupled}
             row["unmet"] = unmet_criteria(row)
-            row["matching"] = _matching_lock_row(Path(e["run_dir"]), res)
+            row["matching"] = _matching_lock_row(product, res, Path(e["run_dir"]))
         except Exception as ex:  # one scenario failing must not sink the suite: say why in its row
             row["error"] = f"{type(ex).__name__}: {ex}"
         rows.append(row)

@@ -36,12 +36,9 @@ import numpy as np
 
 from simsat.units import AXES
 
-from .synthesis import MATCH_STD_FLOOR_PX, instant_synthesis, match_weights, window_compensation
+from .synthesis import instant_synthesis, match_weights, window_compensation
 
 __all__ = ["interleaved_halves", "balance_scale", "local_matching_error"]
-
-#: weight floor on each matched coordinate's σ [px], as the pipeline's synthesis (restore.stages.synthesise_pair)
-STD_FLOOR_PX = MATCH_STD_FLOOR_PX
 
 
 def interleaved_halves(columns, block_columns: int) -> np.ndarray:

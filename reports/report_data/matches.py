@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 
+from reports.matching_lock import matching_lock
 from reports.metrics import attitude_misregistration, misregistration_floor
 from simsat.product import ProductError, read_product
 from simsat.units import AXES
@@ -166,8 +167,6 @@ def matching_lock_of_run(run: RunData):
         return None
     if "matching_lock" in run._cache:
         return run._cache["matching_lock"]
-    from reports.matching_lock import matching_lock
-
     out = None
     try:
         out = matching_lock(run.product, run.result, run.truth)   # the run's product: no second handle on the file
