@@ -115,6 +115,7 @@ def test_a_drifting_tone_is_followed_by_the_polynomial_modulation(monkeypatch):
     assert errs[2] < 0.7 * errs[0]
 
 
+@pytest.mark.slow   # 25-40 s on 2 cores: keeps the default run under 15 min; run with -m slow
 def test_a_line_sweeping_across_the_blind_frequency_is_followed_by_the_tone_s_sweep_rate(monkeypatch):
     """A CMG-like line sweeping 2 Hz over the 1.6 s record across the blind frequency (its rate bending 20 %, its
     amplitude varying 10 %): the search places the tone on a half-bin grid and the polynomial of degree ≤ 4
@@ -359,6 +360,7 @@ def test_the_modulation_degree_rises_where_the_line_drifts_and_not_where_it_is_s
     assert err["chosen"] < 0.8 * err["degree 2"]
 
 
+@pytest.mark.slow   # 25-40 s on 2 cores: keeps the default run under 15 min; run with -m slow
 def test_a_sideband_of_lines_outside_the_notch_does_not_hide_the_line_inside_it():
     """Two 1.6 px lines at 61.1 and 69.8 Hz set lags of up to 4 lines; seen through them, their product's
     sideband at 130.9 Hz is inside the notch and holds more power in the differentials than a 0.3 px line at
