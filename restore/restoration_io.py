@@ -258,6 +258,12 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
                                                                          sort_keys=True)})
         data[f"flagged_{a}"] = ("time", np.asarray(res.flagged.get(a, np.zeros(sg.size, bool)), dtype=np.int8), {
             "long_name": f"1: {a} not restored, predicted sigma above restoration.max_sigma_px"})
+    for a, fu in getattr(res, "knowledge_fusion", {}).items():
+        data[f"knowledge_fusion_weight_{a}"] = ("time", np.asarray(fu.weight, dtype=np.float64), {
+            "long_name": f"weight of the AOCS knowledge's band in the restored {a} (0: the images' estimate kept; "
+                         "restore.knowledge_fusion)", "band_top_hz": float(fu.band_top_hz)})
+        data[f"knowledge_fusion_variance_{a}"] = ("time", np.asarray(fu.knowledge_band_rad2, dtype=np.float64), {
+            "units": "rad2", "long_name": "the knowledge's expected error variance in the band, per line"})
     coords.update({"time": ("time", res.time, {"units": "s"}), "pair": ("pair", np.array(names))})
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
@@ -271,6 +277,20 @@ def _knowledge_checks_from(ds) -> dict:
             d = json.loads(ds[f"sigma_{a}"].attrs.get("knowledge_check", "{}") or "{}")
             if d:
                 out[a] = KnowledgeCheck.from_dict(d)
+    return out
+
+
+def _knowledge_fusion_from(ds) -> dict:
+    """``{axis: KnowledgeFusion}`` recorded as ``knowledge_fusion_weight_<axis>`` (none in older files)."""
+    from .knowledge_fusion import KnowledgeFusion
+
+    out = {}
+    for a in AXES:
+        if f"knowledge_fusion_weight_{a}" in ds.variables:
+            w = _values(ds, f"knowledge_fusion_weight_{a}")
+            v = _values(ds, f"knowledge_fusion_variance_{a}")
+            out[a] = KnowledgeFusion(weight=w, band_top_hz=float(ds[f"knowledge_fusion_weight_{a}"].attrs.get(
+                "band_top_hz", np.nan)), knowledge_band_rad2=v, added_rad2=w * v)
     return out
 
 
@@ -371,7 +391,7 @@ def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult
         yaw_roll_coupling=float(ds.attrs.get("yaw_roll_coupling", 0.0)),
         knowledge_smoothing={a: _values(ds, f"knowledge_smoothing_{a}") for a in AXES
                              if f"knowledge_smoothing_{a}" in ds.variables},
-        knowledge_checks=_knowledge_checks_from(ds))
+        knowledge_checks=_knowledge_checks_from(ds), knowledge_fusion=_knowledge_fusion_from(ds))
 
 
 def read_restoration(path: str | Path, *, product_time: np.ndarray | None = None):

@@ -140,6 +140,7 @@ class Restorer:
             sigma, checks = stages.raise_by_knowledge_check(
                 sigma, records, product, s, {a: knowledge[a] + estimate[a] + smoothing.get(a, 0.0) for a in AXES},
                 smoothings)
+            estimate, sigma, fusions = stages.fuse_knowledge_band(estimate, sigma, records, product, s)
             flag_limits: dict = {}
             estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad,
                                                       flag_limits)
@@ -181,7 +182,8 @@ class Restorer:
                                  detrended_rms={a: detrended_rms_over(ps, restored[a]) for a, ps in sigma.items()},
                                  yaw_pitch_coupling=stages.yaw_pitch_coupling(pairs),
                                  yaw_roll_coupling=stages.yaw_coupling(pairs, "roll"),
-                                 knowledge_smoothing=smoothing, knowledge_checks=checks)
+                                 knowledge_smoothing=smoothing, knowledge_checks=checks,
+                                 knowledge_fusion=fusions)
 
     def _settings_for(self, product: Product) -> RestorationSettings:
         """The settings the product decides: the "auto" high-pass (from the AOCS knowledge's cut-off) and

@@ -152,6 +152,9 @@ class RestorationResult:
     #: per axis checked: the restored angle against the smoothed knowledge
     #: (:class:`restore.knowledge_check.KnowledgeCheck`); its ``excess_rad2`` is in ``sigma``
     knowledge_checks: dict = field(default_factory=dict)
+    #: per axis the fusion could be tried on: the knowledge's band taken where the estimate's proved astray
+    #: (:class:`restore.knowledge_fusion.KnowledgeFusion`); the fusion's error is in ``sigma``
+    knowledge_fusion: dict = field(default_factory=dict)
 
     def yaw_coupling(self, axis: str) -> float:
         """The yaw seen as ``axis`` per radian of missed yaw (0 for yaw or an axis without one)."""
@@ -175,6 +178,11 @@ class RestorationResult:
                                 if a in self.flagged and self.flagged[a].any() else "")
                              for a in self.settings.axes if a in self.sigma)
             lines.append(f"  predicted error (1σ RMS): {pred}")
+        fused = {a: fu for a, fu in (self.knowledge_fusion or {}).items() if fu.lines_fused}
+        if fused:
+            lines.append("  knowledge fusion: " + ", ".join(
+                f"{a} {fu.lines_fused} lines took the AOCS knowledge below {fu.band_top_hz:.1f} Hz (their own band "
+                f"ran astray)" for a, fu in sorted(fused.items())))
         corr = ", ".join(f"{a} {np.nanstd(self.correction[a]) / px:.3f} px rms" for a in self.settings.axes)
         lines.append(f"  correction applied: {corr}")
         for k, v in (self.misregistration or {}).items():

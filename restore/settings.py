@@ -62,6 +62,7 @@ class RestorationSettings:
     highpass_per_axis: bool = False
     sigma_local_error: bool = True
     sigma_knowledge_check: bool = True
+    knowledge_fusion: bool = True
     knowledge_prior: bool = True
     knowledge_conditioning: bool = True
     rematch: int | str = "auto"
@@ -178,6 +179,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
         raise sec.error("posterior_samples", "must be 0 (no predicted σ) or >= 2 Monte Carlo draws, got 1")
     s.sigma_local_error = sec.boolean("sigma_local_error", s.sigma_local_error)
     s.sigma_knowledge_check = sec.boolean("sigma_knowledge_check", s.sigma_knowledge_check)
+    s.knowledge_fusion = sec.boolean("knowledge_fusion", s.knowledge_fusion)
     s.max_sigma_px = sec.number_or("max_sigma_px", "auto", gt=0)
     sec.finish()
     return s

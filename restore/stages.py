@@ -28,6 +28,7 @@ from .knowledge_prior import knowledge_noise_floor, knowledge_psd_ceiling
 from .exposure import exposure_deconvolution
 from .knowledge_check import knowledge_check, smoothed_knowledge_at
 from .knowledge_conditioning import knowledge_conditioning
+from .knowledge_fusion import fuse_with_knowledge
 from .knowledge_smoothing import knowledge_smoothing, lowband_correction
 from .line_weights import gap_distance, residual_weight_factors, window_stretch
 from .local_noise import local_matching_error
@@ -1019,6 +1020,46 @@ def raise_by_knowledge_check(sigma: dict, records: dict, product: Product, setti
                              # judging the σ before it
                              model_sigma=ps.sigma if ps.model_sigma is None else ps.model_sigma)
     return out, checks
+
+
+def fuse_knowledge_band(estimate: dict, sigma: dict, records: dict, product: Product,
+                        settings: RestorationSettings) -> tuple[dict, dict, dict]:
+    """With ``knowledge_fusion``: each restored axis's estimate takes the AOCS knowledge's band (between its
+    high-pass and 0.7 × the knowledge's cut-off) where its own band power proves it astray
+    (:func:`restore.knowledge_fusion.fuse_with_knowledge`), and its σ takes the fusion's error (``w v_k``) in
+    quadrature on those lines. Needs the knowledge's noise and cut-off in product.nc.
+
+    Returns ``(estimate, sigma, fusions)``: new dicts; ``fusions[axis]`` a
+    :class:`~restore.knowledge_fusion.KnowledgeFusion` for each axis the fusion could be tried on."""
+    attrs = product.ds.attrs
+    if not settings.knowledge_fusion or product.knowledge_noise is None or "knowledge_cutoff_hz" not in attrs:
+        return estimate, sigma, {}
+    noise, rate = product.knowledge_noise
+    dt = float(product.time[1] - product.time[0])
+    order = sorted(set(settings.axes) | set(records))
+    estimate, sigma, fusions = dict(estimate), dict(sigma), {}
+    for a in sorted(records):
+        rec = records[a]
+        prior = None if rec.spectrum is None else (rec.spectrum.freq, rec.spectrum.psd)
+        new, fu = fuse_with_knowledge(estimate[a], dt=dt, highpass_hz=float(rec.highpass_hz),
+                                      cutoff_hz=float(attrs["knowledge_cutoff_hz"]), noise_rad=float(noise),
+                                      rate_hz=float(rate), prior=prior, seed=order.index(a))
+        if fu is None:
+            continue
+        fusions[a] = fu
+        estimate[a] = new
+        ps = sigma.get(a)
+        if ps is None or not fu.lines_fused:
+            continue
+        add = fu.added_rad2
+
+        def up(x):
+            return None if x is None else np.sqrt(np.asarray(x) ** 2 + add)
+        extra = float(np.mean(add[np.isfinite(np.asarray(new))])) if np.isfinite(new).any() else 0.0
+        sigma[a] = replace(ps, sigma=up(ps.sigma), detrended_sigma=up(ps.detrended_sigma),
+                           detrended_rms=float(np.sqrt(ps.detrended_rms ** 2 + extra)),
+                           model_sigma=up(ps.model_sigma))
+    return estimate, sigma, fusions
 
 
 def local_errors(pairs: list, settings: RestorationSettings, n_lines: int) -> dict:

@@ -45,6 +45,13 @@ def test_restoration_file_has_the_documented_content(tiny_restored):
     assert back.corr_line_col is not None and back.corr_line_col.shape == back.line_a.shape
     assert 0.8 < ds.attrs["coverage_roll"] <= 1.0
     assert (d / "corrected.nc").exists()
+    # the knowledge fusion's weights per restored axis, read back (tiny's band holds: nothing taken)
+    fused = read_restoration(d / "restoration.nc").knowledge_fusion
+    assert {"roll", "pitch"} <= set(fused)
+    for a, fu in fused.items():
+        w = ds[f"knowledge_fusion_weight_{a}"].values
+        assert np.all((w >= 0) & (w < 1)) and fu.weight.shape == w.shape
+        assert np.all(fu.knowledge_band_rad2[np.isfinite(ds[a].values)] > 0)
 
 
 def test_restoration_beats_the_knowledge_on_roll_and_pitch(tiny_restored):

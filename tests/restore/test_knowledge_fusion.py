@@ -1,0 +1,124 @@
+"""The knowledge's band taken where the images' estimate ran astray (restore.knowledge_fusion), on analytic cases."""
+import numpy as np
+import pytest
+from scipy.fft import irfft
+
+from restore.knowledge_fusion import (FUSION_THRESHOLD, band_part, expected_band_power, fuse_with_knowledge,
+                                      fusion_weight, knowledge_band_variance, local_mean_square)
+from restore.knowledge_prior import knowledge_noise_floor
+from restore.synthesis import highpass_gain
+
+DT = 4e-4
+N = 4000
+HP = 2.0
+CUT = 10.0
+NOISE = 0.3e-6
+RATE = 64.0
+PX = 4e-6
+
+
+def _target(seed, n=N, extra=None):
+    """A stationary draw of the knowledge's error θ − k (its white noise, spline-read at the lines), high-passed
+    as the estimate is: what a restoration that holds its band returns there. ``extra(f)``: a two-sided PSD added."""
+    rng = np.random.default_rng(seed)
+    m = 2 * n
+    f = np.fft.rfftfreq(m, DT)
+    psd = knowledge_noise_floor(f, rate_hz=RATE, noise_rad=NOISE) + (0.0 if extra is None else extra(f))
+    amp = m * np.sqrt(2.0 * psd * highpass_gain(f, HP) ** 2 * (f[1] - f[0]) / 4.0)
+    amp[0] = 0.0
+    return irfft(amp * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)), m)[:n]
+
+
+def _fuse(x, **kw):
+    return fuse_with_knowledge(x, dt=DT, highpass_hz=HP, cutoff_hz=CUT, noise_rad=NOISE, rate_hz=RATE, **kw)
+
+
+def test_the_band_variance_is_the_knowledge_noise_through_the_band_and_the_draws_have_it():
+    top = 0.7 * CUT
+    v = knowledge_band_variance(noise_rad=NOISE, rate_hz=RATE, dt=DT, highpass_hz=HP, top_hz=top)
+    # white two-sided σ²/f_k over the band 2-7 Hz (one-sided 2σ²/f_k) within the gains' roll-offs
+    f = np.linspace(0, 1250, 200001)
+    g = (1 - 2.0 ** (-0.5 * (f / HP) ** 2)) * 2.0 ** (-0.5 * (f / top) ** 2)
+    assert v == pytest.approx(np.trapezoid(2 * NOISE ** 2 / RATE * g ** 2, f), rel=0.05)   # spline response ≈ 1 here
+    # the draws' band power, in the record's interior, is that variance
+    x = np.array([np.mean(band_part(_target(s), dt=DT, top_hz=top)[1000:3000] ** 2) for s in range(40)])
+    assert np.mean(x) == pytest.approx(v, rel=0.15)
+    e = expected_band_power(np.ones(N, bool), dt=DT, highpass_hz=HP, top_hz=top, window_lines=250,
+                            noise_rad=NOISE, rate_hz=RATE)
+    assert np.median(e[1000:3000]) == pytest.approx(v, rel=0.25)
+
+
+def test_fusion_weight_is_the_minimum_variance_share_above_the_threshold():
+    w = fusion_weight([0.5, 9.9, 10.1, 100.0], np.array([1.0, 1.0, 1.0, 2.0]))
+    assert w.tolist() == [0.0, 0.0, pytest.approx(1 - 1 / 10.1), pytest.approx(0.98)]
+    assert FUSION_THRESHOLD == 10.0
+    # the combination's variance (1-w)² (P - v) + w² v is w v, below both estimates' variances
+    p, v = 40.0, 1.0
+    ww = fusion_weight([p], v)[0]
+    assert (1 - ww) ** 2 * (p - v) + ww ** 2 * v == pytest.approx(ww * v)
+    assert ww * v < min(v, p - v)
+
+
+def test_an_estimate_that_holds_its_band_is_left_bit_for_bit():
+    fused_lines = 0
+    for seed in range(12):
+        x = _target(seed)
+        x[1500:1700] = np.nan                                              # a gap: two edges
+        out, fu = _fuse(x)
+        fused_lines += fu.lines_fused
+        if not fu.lines_fused:
+            np.testing.assert_array_equal(out, x)
+    assert fused_lines < 0.01 * 12 * N                                     # the threshold's false alarms
+
+
+def test_a_drift_at_the_record_end_takes_the_knowledge_and_sigma_says_so():
+    """0.3 px of drift over the last 300 lines (band offsets integrated at a record end): the knowledge's band
+    takes over there and the error falls to the knowledge's own band level; the middle is untouched."""
+    x0 = _target(3)
+    t = np.arange(N)
+    drift = np.where(t > N - 300, -0.3 * PX * ((t - (N - 300)) / 300.0) ** 2, 0.0)
+    out, fu = _fuse(x0 + drift)
+    end = slice(N - 200, N)
+    v = knowledge_band_variance(noise_rad=NOISE, rate_hz=RATE, dt=DT, highpass_hz=HP, top_hz=0.7 * CUT)
+    before = np.sqrt(np.mean(drift[end] ** 2))
+    after = np.sqrt(np.mean((out - x0)[end] ** 2))
+    assert fu.lines_fused > 100 and np.all(fu.weight[:N - 700] == 0)
+    np.testing.assert_array_equal(out[:N - 700], x0[:N - 700])
+    assert after < 0.35 * before and after < 3 * np.sqrt(v)
+    assert np.all(fu.added_rad2[fu.weight > 0] > 0) and np.all(fu.added_rad2 <= fu.knowledge_band_rad2)
+
+
+def test_attitude_the_knowledge_filter_misses_is_not_taken_for_a_drift():
+    """A 1 px line at 3 Hz above a 2 Hz knowledge: the target itself holds it and the restoration's prior says so;
+    the band's filter near the record's ends passes more of it, which the expected power per line holds."""
+    cut = 2.0
+    hp = 0.4
+
+    def line(f):
+        return np.where(np.abs(f - 3.0) < 0.3, (1.0 * PX) ** 2 / 2 / 0.6 / 2, 0.0)   # two-sided: a 1 px sine (0.5 px²) over ±0.3 Hz
+
+    rng = np.random.default_rng(0)
+    t = np.arange(N) * DT
+    x = 1.0 * PX * np.sin(2 * np.pi * 3.0 * t + rng.uniform(0, 6.28))
+    f = np.fft.rfftfreq(8192, DT)
+    prior = (f, knowledge_noise_floor(f, rate_hz=RATE, noise_rad=NOISE) + line(f))
+    kw = dict(dt=DT, highpass_hz=hp, cutoff_hz=cut, noise_rad=NOISE, rate_hz=RATE)
+    out, fu = fuse_with_knowledge(x, prior=prior, **kw)
+    assert fu.lines_fused == 0
+    np.testing.assert_array_equal(out, x)
+    _, blind = fuse_with_knowledge(x, **kw)                # without the prior the line looks like a drift
+    assert blind.lines_fused > 0.5 * N
+
+
+def test_no_band_or_no_knowledge_noise_changes_nothing():
+    x = _target(1)
+    out, fu = fuse_with_knowledge(x, dt=DT, highpass_hz=6.0, cutoff_hz=CUT, noise_rad=NOISE, rate_hz=RATE)
+    assert fu is None and out is x or np.array_equal(out, x)
+    out, fu = fuse_with_knowledge(x, dt=DT, highpass_hz=HP, cutoff_hz=CUT, noise_rad=0.0, rate_hz=RATE)
+    assert fu is None and np.array_equal(out, x)
+
+
+def test_local_mean_square_skips_missing_lines():
+    x = np.array([1.0, np.nan, 3.0, np.nan, np.nan, np.nan, np.nan])
+    m = local_mean_square(x, 3)
+    assert m[1] == pytest.approx(5.0) and np.isnan(m[5])
