@@ -508,6 +508,13 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
             "the limit (two sampling spreads) one of the two predictions is short by at least the excess, and the "
             "data cannot tell which; σ takes the images' share of it (restoration.sigma_knowledge_check), and the "
             "cell gives, in brackets, σ if the images' prediction is the short one.")
+    fused = {a: d["fused_lines"] for a, d in unc.items() if d.get("fused_lines")}
+    if fused:
+        pg.para("Knowledge fusion: " + ", ".join(f"{a} {n} lines" for a, n in fused.items()) + " took the AOCS "
+                "knowledge's band below 0.7 × its cut-off, where the restored angle's own band held ten times the "
+                "power the knowledge's error has there (a drift at a record end or a gap edge, from band offsets "
+                "that move like an attitude); σ holds the combination's error on those lines "
+                "(restoration.knowledge_fusion).")
     from .summary import notch_continuum_line_of_run, notch_level_line, scene_offset_line_of_run
 
     explained = (

@@ -47,6 +47,7 @@ def uncertainty(run: RunData) -> dict:
         ``{axis: {time_s, sigma, flagged, flag_limit, flag_judged_on ("model": the model's σ before the local
         error raised it, or "reported"), predicted_rms, noise_scale, band_shares, knowledge_check (the restored
         angle against the smoothed knowledge: :meth:`restore.knowledge_check.KnowledgeCheck.as_dict`, or {}),
+        fused_lines (lines whose low band took the AOCS knowledge's: :mod:`restore.knowledge_fusion`),
         [error, actual_rms, ratio, within_2sigma, calibration]}}``; empty when
         the restoration carries no predicted σ (``posterior_samples = 0``).
     """
@@ -67,7 +68,9 @@ def uncertainty(run: RunData) -> dict:
              "noise_scale": float(rest[f"sigma_{a}"].attrs.get("noise_scale", 1.0)),
              "band_shares": json.loads(rest[f"sigma_{a}"].attrs.get("band_noise_shares", "{}")),
              "knowledge_check": json.loads(rest[f"sigma_{a}"].attrs.get("knowledge_check", "{}") or "{}"),
-             "predicted_rms": float(np.sqrt(np.mean(sg[valid] ** 2))) if valid.any() else float("nan")}
+             "predicted_rms": float(np.sqrt(np.mean(sg[valid] ** 2))) if valid.any() else float("nan"),
+             "fused_lines": int(np.count_nonzero(np.asarray(rest[f"knowledge_fusion_weight_{a}"].values) > 0))
+             if f"knowledge_fusion_weight_{a}" in rest else 0}
         if f"error_{a}" in att:
             e = np.where(valid, att[f"error_{a}"], np.nan)
             d["error"] = e

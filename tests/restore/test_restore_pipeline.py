@@ -876,3 +876,29 @@ def test_knowledge_conditioning_integrates_again_with_the_conditional_prior_and_
     assert stages.knowledge_conditioned(rec, ps, product, res.knowledge["pitch"], rec.increment, s) is None
     with pytest.raises(ScenarioError, match="knowledge_conditioning"):
         restoration_settings({"knowledge_conditioning": "yes"})
+
+
+def test_lines_that_took_the_knowledge_s_band_are_counted_and_said_in_the_report(tiny_restored, tmp_path):
+    """restoration.nc's knowledge_fusion_weight_<axis> is what the report counts and says (the tiny run fuses
+    nothing; a copy with 40 roll lines weighted stands for one that did)."""
+    from reports import report_data as D
+    from reports.run_report import _Page, _uncertainty_section
+
+    d, _ = tiny_restored
+    run = tmp_path / "fused"
+    run.mkdir()
+    for name in ("product.nc", "truth.nc", "run.json"):
+        shutil.copy(d / name, run / name)
+    ds = xr.load_dataset(d / "restoration.nc")
+    assert int((ds["knowledge_fusion_weight_roll"].values > 0).sum()) == 0
+    w = ds["knowledge_fusion_weight_roll"].values.copy()
+    w[100:140] = 0.9
+    ds["knowledge_fusion_weight_roll"].values[:] = w
+    ds.to_netcdf(run / "restoration.nc")
+    unc = D.uncertainty(D.load_run(run))
+    assert unc["roll"]["fused_lines"] == 40 and unc["pitch"]["fused_lines"] == 0
+    pg = _Page(tmp_path / "page")
+    (tmp_path / "page").mkdir()
+    _uncertainty_section(pg, D.load_run(run), {"ifov_rad": float(ds.attrs["pixel_ifov_rad"])})
+    text = "\n".join(pg.parts)
+    assert "Knowledge fusion: roll 40 lines" in text and "pitch 0 lines" not in text
