@@ -88,6 +88,19 @@ def test_a_drift_at_the_record_end_takes_the_knowledge_and_sigma_says_so():
     assert np.all(fu.added_rad2[fu.weight > 0] > 0) and np.all(fu.added_rad2 <= fu.knowledge_band_rad2)
 
 
+def test_a_drift_before_a_gap_is_taken_too_and_the_far_side_is_untouched():
+    """A cloud from line 2400 to 2900: 0.25 px of drift over the 250 lines before it (a gap edge)."""
+    x0 = _target(5)
+    x0[2400:2900] = np.nan
+    t = np.arange(N)
+    drift = np.where((t >= 2150) & (t < 2400), 0.25 * PX * ((t - 2150) / 250.0) ** 2, 0.0)
+    out, fu = _fuse(x0 + drift)
+    edge = slice(2250, 2400)
+    assert np.sqrt(np.mean((out - x0)[edge] ** 2)) < 0.35 * np.sqrt(np.mean(drift[edge] ** 2))
+    assert np.all(np.isnan(out[2400:2900])) and np.all(fu.weight[2400:2900] == 0)
+    np.testing.assert_array_equal(out[3000:], x0[3000:])
+
+
 def test_attitude_the_knowledge_filter_misses_is_not_taken_for_a_drift():
     """A 1 px line at 3 Hz above a 2 Hz knowledge: the target itself holds it and the restoration's prior says so;
     the band's filter near the record's ends passes more of it, which the expected power per line holds."""
