@@ -139,3 +139,25 @@ def test_filled_lines_the_main_fit_ignores_do_not_spoil_the_local_estimate():
     assert _rms_px(got - truth) < 1.2 * _rms_px(ref - truth) < 0.05
     ignored, _ = _lsq_estimate(spoilt, TAUS, DT, lags, None, None, 0.0)       # the fills taken at face value
     assert _rms_px(ignored - truth) > 3 * _rms_px(got - truth)
+
+
+def test_the_estimate_without_prior_is_judged_where_the_prior_failed_not_over_the_whole_margin():
+    """A window [0, 800) grown from failing lines 0-300: the least squares fit lines 0-400 (≤ 1.2 × their median)
+    but not a stretch at 700-760 inside the margin (3 ×). Judged over the whole window it is refused; judged
+    where the prior failed (and a block beyond) it is kept. Where they do not fit the failing lines themselves
+    (a record end, clouds) it is refused either way."""
+    from restore.axis_integration import TRANSIENT_JUDGED_MARGIN_LINES, explained_windows, failing_lines
+
+    n = 3000
+    map_misfit = np.ones(n)
+    map_misfit[:300] = 20.0
+    judged = failing_lines(map_misfit, factor=4.0, margin=TRANSIENT_JUDGED_MARGIN_LINES)
+    assert judged[:300 + TRANSIENT_JUDGED_MARGIN_LINES].all() and not judged[300 + TRANSIENT_JUDGED_MARGIN_LINES + 1:].any()
+    lsq = np.ones(n)
+    lsq[:400] = 1.2
+    lsq[700:760] = 3.0
+    window = [[0, 800]]
+    assert explained_windows(window, lsq, limit=2.0) == []
+    assert explained_windows(window, lsq, limit=2.0, judged=judged) == window
+    lsq[100:200] = 3.0
+    assert explained_windows(window, lsq, limit=2.0, judged=judged) == []
