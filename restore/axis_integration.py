@@ -354,26 +354,6 @@ def running_misfit(residuals, noise, *, block: int = TRANSIENT_BLOCK_LINES) -> n
                           size=int(block), mode="constant", cval=np.nan)
 
 
-def transient_windows(misfit, *, factor: float, margin: int = TRANSIENT_MARGIN_LINES) -> list[list[int]]:
-    """Candidate line windows where a stationary prior fails: the running misfit (:func:`running_misfit`)
-    above ``factor`` times its record median, grown by ``margin`` lines each side, as ``[[first, stop), ...]``.
-
-    Empty with ``factor <= 0`` or nothing standing out.
-    """
-    run = np.asarray(misfit, dtype=np.float64)
-    if not factor > 0 or not np.isfinite(run).any():
-        return []
-    bad = np.isfinite(run) & (run > factor * float(np.nanmedian(run)))
-    if not bad.any():
-        return []
-    n = bad.size
-    grown = np.zeros(n, dtype=bool)
-    for i in np.flatnonzero(bad):
-        grown[max(0, i - margin): min(n, i + margin + 1)] = True
-    edges = np.diff(np.concatenate([[0], grown.astype(np.int8), [0]]))
-    return [[int(a), int(b)] for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
-
-
 def failing_lines(misfit, *, factor: float, margin: int) -> np.ndarray:
     """The lines whose running misfit exceeds ``factor`` times its record median, grown by ``margin`` lines each
     side (boolean per line)."""
@@ -385,6 +365,19 @@ def failing_lines(misfit, *, factor: float, margin: int) -> np.ndarray:
     for i in np.flatnonzero(bad):
         out[max(0, i - margin): min(run.size, i + margin + 1)] = True
     return out
+
+
+def transient_windows(misfit, *, factor: float, margin: int = TRANSIENT_MARGIN_LINES) -> list[list[int]]:
+    """Candidate line windows where a stationary prior fails: the running misfit (:func:`running_misfit`)
+    above ``factor`` times its record median, grown by ``margin`` lines each side, as ``[[first, stop), ...]``.
+
+    Empty with ``factor <= 0`` or nothing standing out.
+    """
+    grown = failing_lines(misfit, factor=factor, margin=margin)
+    if not grown.any():
+        return []
+    edges = np.diff(np.concatenate([[0], grown.astype(np.int8), [0]]))
+    return [[int(a), int(b)] for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
 
 
 def explained_windows(windows, misfit_local, *, limit: float, baseline: float | None = None,
