@@ -51,7 +51,7 @@ from .knowledge_prior import knowledge_noise_floor
 from .synthesis import highpass_gain, highpass_nan
 
 __all__ = ["FUSION_THRESHOLD", "FUSION_WINDOW_S", "FUSION_HIGH_FRACTION", "KnowledgeFusion", "band_part",
-           "band_gain", "knowledge_band_variance", "expected_band_power", "local_mean_square", "fusion_weight", "fuse_with_knowledge"]
+           "band_gain", "knowledge_error_psd", "knowledge_band_variance", "expected_band_power", "local_mean_square", "fusion_weight", "fuse_with_knowledge"]
 
 #: a window's band power must exceed the knowledge's own by this factor before the knowledge takes over
 FUSION_THRESHOLD = 10.0
@@ -89,22 +89,29 @@ def band_part(estimate, *, dt: float, top_hz: float) -> np.ndarray:
 def band_gain(freq, *, highpass_hz: float, top_hz: float) -> np.ndarray:
     """Gain of the band: the restoration's high-pass at ``highpass_hz`` times the band's low-pass at ``top_hz``."""
     f = np.asarray(freq, dtype=np.float64)
-    return highpass_gain(f, highpass_hz) * 2.0 ** (-0.5 * (f / top_hz) ** 2)
+    return highpass_gain(f, highpass_hz) * (1.0 - highpass_gain(f, top_hz))
+
+
+def knowledge_error_psd(freq, *, noise_rad: float, rate_hz: float, prior=None) -> np.ndarray:
+    """Two-sided PSD [rad²/Hz] of the knowledge's error at ``freq``: its white noise floor
+    (:func:`restore.knowledge_prior.knowledge_noise_floor`), or the restoration's prior ``(freq, two-sided PSD)``
+    where that holds more."""
+    f = np.asarray(freq, dtype=np.float64)
+    psd = knowledge_noise_floor(f, rate_hz=rate_hz, noise_rad=noise_rad)
+    if prior is not None:
+        pf, pp = (np.asarray(x, dtype=np.float64) for x in prior)
+        psd = np.maximum(psd, np.interp(f, pf, pp, right=0.0))
+    return psd
 
 
 def knowledge_band_variance(*, noise_rad: float, rate_hz: float, dt: float, highpass_hz: float, top_hz: float,
                             prior=None) -> float:
-    """Variance [rad²] of the knowledge's error through the band (:func:`band_gain`): its white noise
-    (:func:`restore.knowledge_prior.knowledge_noise_floor`), or the restoration's prior ``(freq, two-sided
-    PSD)`` of that error where it holds more."""
+    """Variance [rad²] of the knowledge's error (:func:`knowledge_error_psd`) through the band (:func:`band_gain`),
+    away from the record's ends: the level :func:`expected_band_power` finds in the interior."""
     f = np.linspace(0.0, 0.5 / dt, 65537)
     g2 = band_gain(f, highpass_hz=highpass_hz, top_hz=top_hz) ** 2
-    floor = knowledge_noise_floor(f, rate_hz=rate_hz, noise_rad=noise_rad)
-    v = float(np.trapezoid(2.0 * floor * g2, f))
-    if prior is not None:
-        pf, pp = (np.asarray(x, dtype=np.float64) for x in prior)
-        v = max(v, float(np.trapezoid(2.0 * np.interp(f, pf, pp, right=0.0) * g2, f)))
-    return v
+    psd = knowledge_error_psd(f, noise_rad=noise_rad, rate_hz=rate_hz, prior=prior)
+    return float(np.trapezoid(2.0 * psd * g2, f))
 
 
 def expected_band_power(mask, *, dt: float, highpass_hz: float, top_hz: float, window_lines: int, noise_rad: float,
@@ -118,10 +125,7 @@ def expected_band_power(mask, *, dt: float, highpass_hz: float, top_hz: float, w
     n = ok.size
     m = next_fast_len(2 * n)
     f = np.fft.rfftfreq(m, dt)
-    psd = knowledge_noise_floor(f, rate_hz=rate_hz, noise_rad=noise_rad)
-    if prior is not None:
-        pf, pp = (np.asarray(x, dtype=np.float64) for x in prior)
-        psd = np.maximum(psd, np.interp(f, pf, pp, right=0.0))
+    psd = knowledge_error_psd(f, noise_rad=noise_rad, rate_hz=rate_hz, prior=prior)
     one_sided = 2.0 * psd * highpass_gain(f, highpass_hz) ** 2
     amp = m * np.sqrt(one_sided * (f[1] - f[0]) / 4.0)
     amp[0] = 0.0
