@@ -510,8 +510,11 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
             "cell gives, in brackets, σ if the images' prediction is the short one.")
     fused = {a: d["fused_lines"] for a, d in unc.items() if d.get("fused_lines")}
     if fused:
+        from restore.knowledge_fusion import FUSION_HIGH_FRACTION, FUSION_THRESHOLD
+
         pg.para("Knowledge fusion: " + ", ".join(f"{a} {n} lines" for a, n in fused.items()) + " took the AOCS "
-                "knowledge's band below 0.7 × its cut-off, where the restored angle's own band held ten times the "
+                f"knowledge's band below {FUSION_HIGH_FRACTION:g} × its cut-off, where the restored angle's own band "
+                f"held {FUSION_THRESHOLD:g} times the "
                 "power the knowledge's error has there (a drift at a record end or a gap edge, from band offsets "
                 "that move like an attitude); σ holds the combination's error on those lines "
                 "(restoration.knowledge_fusion).")

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from scipy.ndimage import generic_filter, uniform_filter1d
+from scipy.ndimage import generic_filter, maximum_filter1d, uniform_filter1d
 
 from .integration import integrate
 from .integration.methods import IntegrationMethod, integration_method
@@ -361,10 +361,7 @@ def failing_lines(misfit, *, factor: float, margin: int) -> np.ndarray:
     if not factor > 0 or not np.isfinite(run).any():
         return np.zeros(run.shape, dtype=bool)
     bad = np.isfinite(run) & (run > factor * float(np.nanmedian(run)))
-    out = np.zeros(run.shape, dtype=bool)
-    for i in np.flatnonzero(bad):
-        out[max(0, i - margin): min(run.size, i + margin + 1)] = True
-    return out
+    return maximum_filter1d(bad.astype(np.uint8), size=2 * int(margin) + 1, mode="constant", cval=0).astype(bool)
 
 
 def transient_windows(misfit, *, factor: float, margin: int = TRANSIENT_MARGIN_LINES) -> list[list[int]]:
