@@ -306,7 +306,7 @@ def _notch_prior(res, prior, spec, measured, taus, dt, opts, data, lags, details
     # the prior's own notches (its grid may be shorter than the MAP's: see notch_residual)
     poor = notch_mask(f, np.asarray(taus, dtype=np.float64), np.asarray(prior.noise_std, dtype=np.float64) ** 2 * dt)
     raised = []
-    for nl in notch_levels(resid, taus, dt, n_fft=m, noise_std=prior.noise_std):
+    for nl in notch_levels(resid, taus, dt, n_fft=m, noise_std=prior.noise_std, residual_of=(f, prior.psd)):
         sel = poor & (f >= nl.band_hz[0] - df) & (f <= nl.band_hz[1] + df)
         if nl.detected and sel.any() and nl.level > NOTCH_RAISE * float(np.median(psd[sel])):
             psd[sel] = np.maximum(psd[sel], nl.level)

@@ -303,7 +303,7 @@ class NotchLevel:
 
 
 def notch_levels(diffs, taus, dt, *, n_fft: int, noise_std, false_alarm: float = 0.01, min_gain: float = 0.1,
-                 window_hz: float = 5.0, low_hz: float = 0.0) -> list[NotchLevel]:
+                 window_hz: float = 5.0, low_hz: float = 0.0, residual_of=None) -> list[NotchLevel]:
     """The flat PSD level of each notch :func:`estimate_spectrum` bridges, from the notch's own periodograms.
 
     Bin by bin the notch is unusable (``|G_j|² ≈ 0``: noise and leakage over
@@ -336,6 +336,17 @@ def notch_levels(diffs, taus, dt, *, n_fft: int, noise_std, false_alarm: float =
         The notches' definition (:func:`notch_mask`).
     low_hz : float
         Notches starting below this are not estimated (the AOCS knowledge's band).
+    residual_of : (freq, psd), optional
+        The prior [Hz, rad²/Hz two-sided] of the fit whose residual ``diffs``
+        is. Given, each pair's noise level at a notch is read from the
+        residual on the notch's two sides (twice its width each, other
+        notches left out), where a fit with that prior leaves ``ν_j (1 − h_j)``
+        of the pair's noise ν_j, ``h_j = a_j S / (1 + S Σ_i a_i)`` its
+        leverage: the white level ν_j is a median over the blind frequencies
+        of the whole band, and matching noise is coloured (at 12 px peak
+        jitter 3-4 × ν_j at 240-340 Hz); a floor above ν_j read as a level
+        would raise a notch's prior on noise, which the filter then amplifies
+        through the notch. The level is only ever raised, never lowered below ν_j.
 
     Returns
     -------
@@ -351,7 +362,7 @@ def notch_levels(diffs, taus, dt, *, n_fft: int, noise_std, false_alarm: float =
     sd = per_pair(noise_std, p, "noise_std")
     if sd is None or not np.all(sd > 0):
         raise ValueError(f"noise_std: must be > 0 for every pair, got {noise_std!r}")
-    nu = sd**2 * dt
+    nu = nu_white = sd**2 * dt
     f = np.fft.rfftfreq(n_fft, dt)
     poor = notch_mask(f, taus, nu, min_gain=min_gain, window_hz=window_hz)
     edges = np.diff(np.r_[0, poor.astype(np.int8), 0])
@@ -365,9 +376,11 @@ def notch_levels(diffs, taus, dt, *, n_fft: int, noise_std, false_alarm: float =
     w2 = _taper(seg) ** 2
     width = max(b - a for a, b in spans)
     rho2 = (np.abs(np.fft.fft(w2, n=n_fft))[:width] / np.sum(w2)) ** 2
+    local = _flank_levels(P, f, taus, nu, poor, spans, residual_of) if residual_of is not None else None
     out = []
-    for a, b in spans:
+    for i, (a, b) in enumerate(spans):
         g2 = 2 * (1 - np.cos(2 * np.pi * f[None, a:b] * taus[:, None]))
+        nu = nu_white if local is None else nu_white * local[i]
         A = g2 / nu[:, None]
         norm = float((A**2).sum())
         if not norm > 0:
@@ -379,6 +392,27 @@ def notch_levels(diffs, taus, dt, *, n_fft: int, noise_std, false_alarm: float =
         thr = gamma.ppf(1 - false_alarm / len(spans), a=mu**2 / var, scale=var / mu) if var > 0 else mu
         out.append(NotchLevel(bins=(int(a), int(b)), band_hz=(float(f[a]), float(f[b - 1])),
                               level=(t_stat - mu) / norm, threshold=float(thr - mu) / norm))
+    return out
+
+
+def _flank_levels(P: np.ndarray, f: np.ndarray, taus: np.ndarray, nu: np.ndarray, poor: np.ndarray, spans: list,
+                  prior) -> list[np.ndarray]:
+    """Per notch, each pair's noise level on the notch's two sides in units of its white level ν_j (at least 1):
+    the mean of ``P_j / (ν_j (1 − h_j))`` over twice the notch's width on each side, other notches left out
+    (:func:`notch_levels`, ``residual_of``)."""
+    S = np.interp(f, np.asarray(prior[0], dtype=np.float64), np.asarray(prior[1], dtype=np.float64))
+    a_all = 2 * (1 - np.cos(2 * np.pi * f[None, :] * taus[:, None])) / nu[:, None]
+    h = a_all * S[None, :] / (1.0 + S[None, :] * a_all.sum(axis=0)[None, :])
+    out = []
+    for a, b in spans:
+        w = b - a
+        idx = np.r_[max(a - 2 * w, 1):a, b:min(b + 2 * w, f.size)]
+        idx = idx[~poor[idx]]
+        if idx.size < w:
+            out.append(np.ones(nu.size))
+            continue
+        ratio = P[:, idx] / (nu[:, None] * np.maximum(1.0 - h[:, idx], 0.05))
+        out.append(np.maximum(ratio.mean(axis=1), 1.0))
     return out
 
 
