@@ -278,3 +278,36 @@ def test_flank_levels_scale_the_white_level_by_what_the_sides_show():
     np.testing.assert_allclose(levels[:, 1], 4.0, rtol=0.4)
     assert abs(levels[:, 1].mean() - 4.0) < 0.4
     assert levels[:, [0, 2]].mean() < 1.2
+
+
+def test_coloured_noise_beside_a_notch_does_not_raise_it(monkeypatch):
+    """Lines at 50-60 Hz and matching noise 4 × the white level (in power) at 200-350 Hz in every pair, as at 12 px
+    peak jitter: read against the white level the 270 Hz notch shows a level and its prior is raised (the filter
+    would then pass that noise through the notch); read against the notch's sides, nothing is raised."""
+    import restore.integration.spectrum as spectrum
+
+    rng = np.random.default_rng(21)
+    t = np.arange(N + max(STEPS)) * DT
+    theta = sum(a * np.sin(2 * np.pi * f0 * t + ph) for a, f0, ph in ((3e-6, 50.3, 0.1), (2e-6, 57.9, 1.3),
+                                                                      (1.5e-6, 61.1, 2.2)))
+    d = []
+    f = np.fft.rfftfreq(N, DT)
+    band = (f > 200) & (f < 350)
+    for k in STEPS:
+        w = np.fft.rfft(rng.normal(0.0, SD, N))
+        w[band] *= 2.0
+        d.append(theta[k:k + N] - theta[:N] + np.fft.irfft(w, n=N))
+
+    def run():
+        return integrate_axis(d, list(TAUS), DT, method="wiener", highpass_hz=0.0)
+
+    res = run()
+    assert not res.options.get("notch_levels")
+    plain = spectrum.notch_levels
+
+    def white_only(*args, residual_of=None, **kw):
+        return plain(*args, **kw)
+
+    monkeypatch.setattr(spectrum, "notch_levels", white_only)
+    raised = run().options.get("notch_levels")
+    assert raised and any(lo < 270.0 < hi for lo, hi, _ in raised)
