@@ -309,7 +309,8 @@ def notch_levels(diffs, taus, dt, *, n_fft: int, noise_std, false_alarm: float =
     Bin by bin the notch is unusable (``|G_j|² ≈ 0``: noise and leakage over
     ~0); over its whole width it is not: the pairs' flanks still see the
     attitude, weakly. Modelling the PSD as one constant ``S`` across the notch,
-    ``P_j(f) / ν_j − 1 = a_j(f) S`` with ``a_j = |G_j|² / ν_j`` is fitted by
+    ``P_j(f) / ν_j − 1 = a_j(f) S`` with ``a_j = |G_j|² / ν_j`` (ν_j the pair's
+    white level, or with ``residual_of`` its level on the notch's sides) is fitted by
     least squares over the notch's bins and the pairs,
     ``S = Σ a_j (P_j/ν_j − 1) / Σ a_j²`` — dominated by the flanks, where the
     pairs see most. Noise alone gives ``Σ a_j P_j / ν_j`` the mean ``Σ a_j``
@@ -362,7 +363,7 @@ def notch_levels(diffs, taus, dt, *, n_fft: int, noise_std, false_alarm: float =
     sd = per_pair(noise_std, p, "noise_std")
     if sd is None or not np.all(sd > 0):
         raise ValueError(f"noise_std: must be > 0 for every pair, got {noise_std!r}")
-    nu = nu_white = sd**2 * dt
+    nu = sd**2 * dt
     f = np.fft.rfftfreq(n_fft, dt)
     poor = notch_mask(f, taus, nu, min_gain=min_gain, window_hz=window_hz)
     edges = np.diff(np.r_[0, poor.astype(np.int8), 0])
@@ -380,12 +381,12 @@ def notch_levels(diffs, taus, dt, *, n_fft: int, noise_std, false_alarm: float =
     out = []
     for i, (a, b) in enumerate(spans):
         g2 = 2 * (1 - np.cos(2 * np.pi * f[None, a:b] * taus[:, None]))
-        nu = nu_white if local is None else nu_white * local[i]
-        A = g2 / nu[:, None]
+        nu_n = nu if local is None else nu * local[i]      # each pair's noise at this notch
+        A = g2 / nu_n[:, None]
         norm = float((A**2).sum())
         if not norm > 0:
             continue
-        t_stat = float((A * P[:, a:b] / nu[:, None]).sum())
+        t_stat = float((A * P[:, a:b] / nu_n[:, None]).sum())
         mu = float(A.sum())
         corr = toeplitz(rho2[:b - a])
         var = float(sum(A[j] @ corr @ A[j] / shapes[j, 0] for j in range(p)))
