@@ -103,17 +103,22 @@ def test_notch_residual_takes_out_a_line_beside_the_notch():
     assert not clean.detected and clean.level < 0.05 * raw.level
 
 
+def _map_of_a_continuum(s0, seed):
+    """Differentials of a flat continuum of level ``s0`` (seed ``40 + seed``), the Wiener MAP of them, its prior
+    and the MAP grid's length."""
+    rng = np.random.default_rng(40 + seed)
+    d = _differentials(_white(s0, rng), rng)
+    res = integrate_wiener(d, TAUS, DT, noise_std=SD, return_details=True)
+    return d, res, axis_integration._prior_of(res.spectrum, 3), res.theta_grid.size
+
+
 def test_notch_residual_keeps_what_the_bridge_explained():
     """With a prior in the notch near the true level, the MAP explains part of the notch's flanks: the residual
     alone would read less than the level, the residual with the field's in-notch part added back reads it."""
     s0 = 1e-16
     lv = []
     for seed in range(6):
-        rng = np.random.default_rng(40 + seed)
-        d = _differentials(_white(s0, rng), rng)
-        res = integrate_wiener(d, TAUS, DT, noise_std=SD, return_details=True)
-        prior = axis_integration._prior_of(res.spectrum, 3)
-        m = res.theta_grid.size
+        d, res, prior, m = _map_of_a_continuum(s0, seed)
         a, b = notch_levels(d, TAUS, DT, n_fft=m, noise_std=SD)[0].bins
         prior.psd[a:b] = s0                          # the bridge at the true level
         res = integrate_wiener(d, TAUS, DT, noise_std=SD, psd=(prior.freq, prior.psd), return_details=True)
@@ -244,11 +249,7 @@ def test_the_flank_level_keeps_a_continuum_seen_through_the_notch():
     s0 = 1e-17
     ratios = []
     for seed in range(6):
-        rng = np.random.default_rng(40 + seed)
-        d = _differentials(_white(s0, rng), rng)
-        res = integrate_wiener(d, TAUS, DT, noise_std=SD, return_details=True)
-        prior = axis_integration._prior_of(res.spectrum, 3)
-        m = res.theta_grid.size
+        d, res, prior, m = _map_of_a_continuum(s0, seed)
         r = notch_residual(res, d, TAUS, DT, None, prior)
         plain = notch_levels(r, TAUS, DT, n_fft=m, noise_std=SD)
         flank = notch_levels(r, TAUS, DT, n_fft=m, noise_std=SD, residual_of=(prior.freq, prior.psd))
