@@ -20,14 +20,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.fft import next_fast_len, rfft
 from scipy.linalg import toeplitz
-from scipy.ndimage import maximum_filter1d, uniform_filter1d
+from scipy.ndimage import maximum_filter1d, median_filter, uniform_filter1d
 from scipy.signal import find_peaks
-from scipy.stats import gamma
+from scipy.stats import chi2, gamma
 
 from ._common import per_pair, prepare
 
 __all__ = ["SpectralEstimate", "estimate_differential_noise", "estimate_spectrum", "find_lines", "Lines",
-           "notch_mask", "NotchLevel", "notch_levels"]
+           "notch_mask", "NotchLevel", "notch_levels", "null_space_colour"]
 
 _BLIND_G2 = 0.05
 
@@ -105,6 +105,50 @@ def _noise_levels(P: np.ndarray, f: np.ndarray, taus: np.ndarray) -> np.ndarray:
     return out
 
 
+def null_space_colour(resid, taus, dt: float, noise_std, *, band_hz: float = 20.0) -> tuple[np.ndarray, np.ndarray] | None:
+    """The noise's power over its white level, per frequency, from the part of a fit residual no attitude can make:
+    ``(freq, colour)`` on ``rfftfreq(lines, dt)``, or None with fewer than two pairs or too few common lines.
+
+    At each frequency an attitude moves the pairs' differentials along one
+    direction, ``(G_j(f) / √ν_j)_j`` in whitened units; the residual's spectrum
+    projected on the ``p − 1`` directions orthogonal to it holds noise alone,
+    whatever the attitude and whatever the fit missed of it, and its power
+    over ``p − 1`` (Hann taper over the lines every pair has, averaged over
+    ``band_hz``) is the noise's colour there. On a fit's residual the lines
+    are taken out first; on raw differentials the taper's leakage of strong
+    lines and per-line lags would put signal outside that direction. A noise
+    part that moves like an attitude (a band shared by pairs) lies along it
+    and is not seen: the colour is a lower bound below the lowest tens of Hz.
+    """
+    R = np.asarray(resid, dtype=np.float64)
+    if R.ndim != 2 or R.shape[0] < 2:
+        return None
+    p, n = R.shape
+    ok = np.all(np.isfinite(R), axis=0)
+    if ok.sum() < 64:
+        return None
+    sd = per_pair(noise_std, p, "noise_std")
+    taus = np.asarray(taus, dtype=np.float64)
+    w = _taper(n) * ok
+    ref = float(np.sum(w**2))
+    X = np.empty((p, n // 2 + 1), dtype=np.complex128)
+    for j in range(p):
+        x = np.where(ok, R[j], 0.0)
+        X[j] = rfft((x - np.sum(x * w) / np.sum(w)) * w) / sd[j]
+    f = np.fft.rfftfreq(n, dt)
+    g = (np.exp(2j * np.pi * f[None, :] * taus[:, None]) - 1.0) / sd[:, None]
+    norm = np.linalg.norm(g, axis=0)
+    gn = g / np.where(norm > 0, norm, 1.0)
+    proj = X - gn * np.sum(np.conj(gn) * X, axis=0)
+    null = np.sum(np.abs(proj) ** 2, axis=0) / ((p - 1) * ref)
+    L = max(1, int(round(band_hz / (f[1] - f[0])))) | 1
+    # a running median, over the chi-square's own median: a narrow feature (a strong line's sideband through
+    # the per-line lags, its leakage) does not move it, a colour tens of Hz wide does
+    colour = median_filter(null, size=L, mode="nearest") / (chi2.median(2 * (p - 1)) / (2 * (p - 1)))
+    colour[norm <= 1e-3 * norm.max()] = 1.0
+    return f, colour
+
+
 @dataclass
 class SpectralEstimate:
     """Spectral description of the signal behind a set of differentials.
@@ -171,7 +215,8 @@ def estimate_differential_noise(diffs, taus, dt, *, n_fft: int | None = None) ->
 def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=None,
                       resolution_hz: float = 0.5, detection_hz: float = 2.0,
                       false_alarm: float = 0.01, dilate_hz: float = 1.0,
-                      noise_floor: float = 1e-4, min_gain: float = 0.1) -> SpectralEstimate:
+                      noise_floor: float = 1e-4, min_gain: float = 0.1,
+                      noise_colour=None) -> SpectralEstimate:
     """Estimate the signal PSD and the noise levels from the differentials.
 
     Parameters
@@ -201,6 +246,11 @@ def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=No
         notch's two edges instead of being divided by ~0 (a strong line's
         leakage would otherwise make it explode there, and a line's skirt on
         one side would make the filter amplify the noise in the notch).
+    noise_colour : (freq, colour), optional
+        The noise's power over its white level, common to the pairs
+        (:func:`null_space_colour`): the estimate and its detection take each
+        pair's noise as ν_j times the colour where that is above 1 (a noise
+        above its white level, read as signal, would raise the prior there).
 
     Returns
     -------
@@ -227,7 +277,11 @@ def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=No
     var_d = np.array([np.var(D[j, valid[j]]) if valid[j].any() else 0.0 for j in range(p)])
     nu = np.maximum(nu, (noise_floor**2) * var_d * dt + 1e-300)
     g2 = 2 * (1 - np.cos(2 * np.pi * f[None, :] * taus[:, None]))
-    a = g2 / nu[:, None]
+    nu_f = nu[:, None] * np.ones((1, f.size))
+    if noise_colour is not None:
+        nu_f = nu_f * np.maximum(np.interp(f, np.asarray(noise_colour[0], dtype=np.float64),
+                                           np.asarray(noise_colour[1], dtype=np.float64)), 1.0)[None, :]
+    a = g2 / nu_f
     den = (a**2).sum(0) + 1e-300
     b = a / den                       # S_hat = sum_j b_j (P_j / nu_j - 1)
     mu = b.sum(0)
@@ -235,7 +289,7 @@ def estimate_spectrum(diffs, taus, dt, *, n_fft: int | None = None, noise_std=No
     s_fine = None
     for i, (hz, L) in enumerate(zip((resolution_hz, detection_hz), widths)):
         Ps = uniform_filter1d(P, L, axis=-1, mode="nearest") if L > 1 else P
-        q = (b * Ps / nu[:, None]).sum(0)
+        q = (b * Ps / nu_f).sum(0)
         var = (b**2 / shapes[:, i:i + 1]).sum(0)
         n_tests = max(1.0, f[-1] / max(hz, df))
         with np.errstate(invalid="ignore", divide="ignore"):
