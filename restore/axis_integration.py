@@ -39,7 +39,7 @@ from .synthesis import highpass_nan
 
 __all__ = ["AXIS_OPTIONS", "AxisIntegration", "PriorSpectrum", "integrate_axis", "lag_corrected_differentials",
            "periodic_highpass", "running_misfit", "transient_windows", "explained_windows", "transient_blend",
-           "notch_residual"]
+           "notch_residual", "significant_colour"]
 
 
 @dataclass
