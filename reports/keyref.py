@@ -206,9 +206,7 @@ MEANING = {
     "each axis's restored angle and its smoothed AOCS knowledge disagree by beyond both predicted errors (between "
     "1.25 × the high-pass and 0.7 × the knowledge's cut-off, as measured: the report calls it a disagreement beyond two "
     "sampling spreads, σ takes its share of any excess; the check itself is always recorded, restoration.nc sigma_<axis> knowledge_check, when the product records the knowledge's "
-    "noise and filter, and the band holds at least three periodogram bins); the data cannot tell which prediction is short, so each takes its share — "
-    "but past those two spreads the images take all that the knowledge's error, a process the product describes, "
-    "cannot hold (the observed power less the images' prediction and the knowledge's times that limit)",
+    "noise and filter, and the band holds at least three periodogram bins); the data cannot tell which prediction is short, so each takes its share",
     "restoration.knowledge_fusion": "where a stretch of the restored angle holds, between the high-pass and 0.7 × "
     "the knowledge's cut-off, ten times the power the AOCS knowledge's error has there (its noise, or the prior "
     "where larger: a drift near a record end or a gap edge from band offsets that move like an attitude), take the "

@@ -234,9 +234,8 @@ def knowledge_check_line(restoration, axes, *, took_share: bool = True) -> str |
     errors (the ``knowledge_check`` of ``sigma_<axis>`` in restoration.nc, where its excess passed the limit),
     or None.
 
-    The data cannot tell which prediction is short: σ takes the images' share of the excess, and past the limit
-    at least what the knowledge's side cannot hold (``restoration.sigma_knowledge_check``,
-    :attr:`restore.knowledge_check.KnowledgeCheck.booked_rad2`); the line also gives σ as it would be if the images' prediction were
+    The data cannot tell which prediction is short: σ takes the images' share of the excess
+    (``restoration.sigma_knowledge_check``); the line also gives σ as it would be if the images' prediction were
     the short one, ``√(σ² − booked² + excess²)``, so that a reader without truth sees how optimistic σ may be.
     ``took_share``: whether σ holds that share (the setting ``sigma_knowledge_check``, on by default).
     """

@@ -24,7 +24,7 @@ from .integration.wiener import ceiling_on_grid, spectrum_for_lines
 from .matching import match_points, support_margin
 from .method_choice import predicted_differential, resolve_method
 from .observability import observability
-from .knowledge_prior import knowledge_noise_floor, knowledge_psd_ceiling
+from .knowledge_prior import knowledge_noise_floor, knowledge_psd_ceiling, knowledge_response
 from .exposure import exposure_deconvolution
 from .knowledge_check import knowledge_check, smoothed_knowledge_at
 from .knowledge_conditioning import knowledge_conditioning
@@ -52,7 +52,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_error_prior", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -1022,6 +1022,40 @@ def raise_by_knowledge_check(sigma: dict, records: dict, product: Product, setti
     return out, checks
 
 
+#: :func:`knowledge_error_prior` reads the knowledge's own ceiling where its filter passes at least this
+KNOWLEDGE_ERROR_MIN_GAIN = 0.5
+
+
+def knowledge_error_prior(product: Product, knowledge: np.ndarray, record: IntegrationRecord) -> tuple | None:
+    """``(freq, two-sided PSD)`` of the AOCS knowledge's error on one axis, as the knowledge fusion needs it: the
+    ceiling the knowledge's own periodogram and its recorded filter put on it
+    (:func:`restore.knowledge_prior.knowledge_psd_ceiling`: its filter's error ``|1 − F|² S_θ`` plus its noise)
+    where the filter passes at least :data:`KNOWLEDGE_ERROR_MIN_GAIN` of the attitude, and the restoration's prior
+    beyond, where the knowledge says little; the prior alone when the product does not record the filter.
+
+    Not the record's prior: a record conditioned on the knowledge (:func:`knowledge_conditioned`) holds the
+    variance of the knowledge's error *given* the knowledge, which is its noise alone where the filter is
+    known — a causal filter's error in its own band (86° of lag at half its cut-off) is known there, and is
+    large: taken for the knowledge's error power, that variance made every line of a 4 Hz causal knowledge's
+    scene look astray (an unseen scene: 60 % of the lines fused, then flagged)."""
+    prior = None if record.spectrum is None else (np.asarray(record.spectrum.freq, dtype=np.float64),
+                                                  np.asarray(record.spectrum.psd, dtype=np.float64))
+    attrs = product.ds.attrs
+    if product.knowledge_noise is None or "knowledge_cutoff_hz" not in attrs or "knowledge_filter_order" not in attrs:
+        return prior
+    noise_rad, rate_hz = product.knowledge_noise
+    cutoff, order = float(attrs["knowledge_cutoff_hz"]), int(attrs["knowledge_filter_order"])
+    kind = str(attrs.get("knowledge_filter", "butterworth_zero_phase"))
+    f, ceiling = knowledge_psd_ceiling(knowledge, float(record.line_period_s), cutoff_hz=cutoff, order=order,
+                                       rate_hz=rate_hz, noise_rad=noise_rad, kind=kind)
+    # where the filter passes less than half the attitude the ceiling divides the knowledge's noise by |F|²: the
+    # restoration's prior says more there
+    weak = ~np.isfinite(ceiling) | (np.abs(knowledge_response(f, cutoff, order, kind)) < KNOWLEDGE_ERROR_MIN_GAIN)
+    if weak.any():
+        ceiling = np.where(weak, 0.0 if prior is None else np.interp(f, prior[0], prior[1], right=0.0), ceiling)
+    return f, ceiling
+
+
 def fuse_knowledge_band(estimate: dict, sigma: dict, records: dict, product: Product,
                         settings: RestorationSettings) -> tuple[dict, dict, dict]:
     """With ``knowledge_fusion``: each restored axis's estimate takes the AOCS knowledge's band (between its
@@ -1038,9 +1072,10 @@ def fuse_knowledge_band(estimate: dict, sigma: dict, records: dict, product: Pro
     dt = float(product.time[1] - product.time[0])
     order = sorted(set(settings.axes) | set(records))
     estimate, sigma, fusions = dict(estimate), dict(sigma), {}
+    knowledge = dict(zip(AXES, product.knowledge.at(product.time)))
     for a in sorted(records):
         rec = records[a]
-        prior = None if rec.spectrum is None else (rec.spectrum.freq, rec.spectrum.psd)
+        prior = knowledge_error_prior(product, knowledge[a], rec)
         new, fu = fuse_with_knowledge(estimate[a], dt=dt, highpass_hz=float(rec.highpass_hz),
                                       cutoff_hz=float(attrs["knowledge_cutoff_hz"]), noise_rad=float(noise),
                                       rate_hz=float(rate), prior=prior, seed=order.index(a))

@@ -135,3 +135,41 @@ def test_local_mean_square_skips_missing_lines():
     x = np.array([1.0, np.nan, 3.0, np.nan, np.nan, np.nan, np.nan])
     m = local_mean_square(x, 3)
     assert m[1] == pytest.approx(5.0) and np.isnan(m[5])
+
+
+def test_a_causal_knowledges_error_in_its_own_band_is_not_taken_for_the_estimate_running_astray():
+    """A 4 Hz causal AOCS filter lags a 2.2 Hz line by 86°: the knowledge's error θ − k there is the line's own
+    size, and a restoration that holds its band returns it. Against the knowledge's error PSD the product gives
+    (``stages.knowledge_error_prior``: its filter's error from its own periodogram, plus its noise) no line is
+    fused; against the variance of that error given the knowledge (its noise alone, what a conditioned record's
+    prior holds there) every line is."""
+    from types import SimpleNamespace
+
+    from restore.knowledge_prior import knowledge_response
+    from restore.stages import knowledge_error_prior
+
+    cut, hp, f0, amp = 4.0, 0.8, 2.2, 3e-6
+    t = np.arange(N) * DT
+    theta = amp * np.sin(2 * np.pi * f0 * t + 0.4)
+    g = knowledge_response(f0, cut, 4, "butterworth_causal")
+    k = amp * abs(g) * np.sin(2 * np.pi * f0 * t + 0.4 + np.angle(g))
+    k = k + np.random.default_rng(3).standard_normal(N) * 0.02e-6
+    e = theta - k
+    assert np.std(e) > 0.9 * np.std(theta)
+    product = SimpleNamespace(ds=SimpleNamespace(attrs={"knowledge_cutoff_hz": cut, "knowledge_filter_order": 4,
+                                                        "knowledge_filter": "butterworth_causal"}),
+                              knowledge_noise=(NOISE, RATE))
+    fr = np.fft.rfftfreq(N, DT)
+    floor = knowledge_noise_floor(fr, rate_hz=RATE, noise_rad=NOISE)
+    record = SimpleNamespace(spectrum=SimpleNamespace(freq=fr, psd=floor), line_period_s=DT)
+    prior = knowledge_error_prior(product, k, record)
+    i = np.argmin(abs(prior[0] - f0))
+    assert prior[1][i] > 1e3 * floor[i]
+    kw = dict(dt=DT, highpass_hz=hp, cutoff_hz=cut, noise_rad=NOISE, rate_hz=RATE)
+    _, fu = fuse_with_knowledge(e, prior=prior, **kw)
+    assert fu is not None and fu.lines_fused == 0
+    _, fu_given = fuse_with_knowledge(e, prior=(fr, floor), **kw)
+    assert fu_given.lines_fused > 0.9 * N
+    # without the filter in the product, the record's prior stands
+    bare = SimpleNamespace(ds=SimpleNamespace(attrs={"knowledge_cutoff_hz": cut}), knowledge_noise=(NOISE, RATE))
+    np.testing.assert_array_equal(knowledge_error_prior(bare, k, record)[1], floor)

@@ -828,15 +828,11 @@ def test_the_knowledge_check_raises_sigma_by_what_it_books_and_leaves_the_flags(
     seen.clear()
     out, checks = stages.raise_by_knowledge_check(fake, res.integration, product, s, res.restored, smoothings)
     assert set(checks) == {"roll", "pitch"}
-    # images and knowledge predicted alike (5e-16 each): σ takes half the excess, or, the excess being past the
-    # threshold q, all that the knowledge's q × 5e-16 cannot hold; sorted, pitch comes first
-    from restore.knowledge_check import threshold_ratio
-    b = max(4.5e-16, 1.9e-15 - 5e-16 - threshold_ratio(8) * 5e-16)
-    assert b > 4.5e-16
-    assert checks["pitch"].booked_rad2 == pytest.approx(b, rel=1e-12)
-    np.testing.assert_allclose(out["pitch"].sigma, np.sqrt(sig ** 2 + b), rtol=1e-12)
+    # images and knowledge predicted alike (5e-16 each): σ takes half the excess; sorted, pitch comes first
+    assert checks["pitch"].booked_rad2 == pytest.approx(4.5e-16, rel=1e-12)
+    np.testing.assert_allclose(out["pitch"].sigma, np.sqrt(sig ** 2 + 4.5e-16), rtol=1e-12)
     np.testing.assert_array_equal(out["pitch"].model_sigma, sig)
-    assert out["pitch"].detrended_rms == pytest.approx(np.sqrt(1e-16 + b))
+    assert out["pitch"].detrended_rms == pytest.approx(np.sqrt(1e-16 + 4.5e-16))
     assert out["roll"] is fake["roll"]
     restored, ks, k, power, kw = seen[0]
     np.testing.assert_array_equal(restored, res.restored["pitch"])
