@@ -157,7 +157,7 @@ class KnowledgeCheck:
         the prediction it is compared with leaves out the errors' covariance (an upper bound, module docstring),
         which pulls the other way.
 
-        Not tried again: booking past the threshold at least ``O − P_I − q P_K``, what the knowledge's side
+        Tried (thirty-fifth session) and not kept: booking past the threshold at least ``O − P_I − q P_K``, what the knowledge's side
         could not hold if its prediction were exact. It is not: the smoothing's error (``W σ²`` per DCT
         coefficient, with ``W`` estimated from the coefficients themselves) is short where the gains are
         mid-way, and on geo_noisy_knowledge (58 samples, 0.3 px each) the smoothed knowledge erred by 0.119 px

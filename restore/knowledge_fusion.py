@@ -20,9 +20,12 @@ the knowledge's error through the band and the images' error. The
 knowledge's error ``θ − k`` is exactly what the restoration estimates above
 its high-pass: its variance in the band ``v_k`` is the larger of its white
 noise's (from its noise and rate, known: :func:`knowledge_band_variance`) and
-the restoration's own prior there (which holds, besides that noise, what the
+the error PSD the caller gives (which holds, besides that noise, what the
 AOCS filter leaves out of the attitude: lines at 3-8 Hz above a 2 Hz
-knowledge). Near the record's ends and gaps the band's filter sees one side
+knowledge, a causal filter's lag in its own band; the pipeline gives the
+ceiling the knowledge's own periodogram and filter put on it where the filter
+passes half the attitude, the restoration's prior beyond:
+:func:`restore.stages.knowledge_error_prior`). Near the record's ends and gaps the band's filter sees one side
 only and passes more of a strong attitude: ``v_k`` is taken per line, as the
 mean over :data:`FUSION_DRAWS` stationary draws of that error, high-passed,
 masked and filtered as the estimate is (:func:`expected_band_power`). The
