@@ -170,6 +170,11 @@ def test_a_causal_knowledges_error_in_its_own_band_is_not_taken_for_the_estimate
     assert fu is not None and fu.lines_fused == 0
     _, fu_given = fuse_with_knowledge(e, prior=(fr, floor), **kw)
     assert fu_given.lines_fused > 0.9 * N
+    # where the filter passes less than half the attitude (above ~1.15 × the cut-off) the ceiling would divide
+    # the knowledge's noise by |F|²: the record's prior stands there
+    weak = np.abs(knowledge_response(prior[0], cut, 4, "butterworth_causal")) < 0.5
+    assert weak.any() and prior[0][weak].min() > cut
+    np.testing.assert_array_equal(prior[1][weak], np.interp(prior[0][weak], fr, floor))
     # without the filter in the product, the record's prior stands
     bare = SimpleNamespace(ds=SimpleNamespace(attrs={"knowledge_cutoff_hz": cut}), knowledge_noise=(NOISE, RATE))
     np.testing.assert_array_equal(knowledge_error_prior(bare, k, record)[1], floor)
