@@ -518,9 +518,16 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
                 "power the knowledge's error has there (a drift at a record end or a gap edge, from band offsets "
                 "that move like an attitude); σ holds the combination's error on those lines "
                 "(restoration.knowledge_fusion).")
-    from .summary import notch_continuum_line_of_run, notch_level_line, scene_offset_line_of_run
+    from .summary import (knowledge_filter_line_of_run, notch_continuum_line_of_run, notch_level_line,
+                          scene_offset_line_of_run)
 
     explained = (
+        (knowledge_filter_line_of_run(run, list(unc)),
+         ". Below the high-pass the images' estimate is discarded (the differentials see little there and a band's "
+         "slow bias would pass for attitude) and the restored angle is the knowledge: its noise is smoothed and "
+         "in σ, and so is its filter's own error, estimated from the knowledge through (1 − F)/F "
+         "(restore.observability.knowledge_filter_error_below) — nothing for a zero-phase filter well below its "
+         "cut-off, the lag of a causal one. Nothing restores it."),
         (scene_offset_line_of_run(run, list(unc)),
          ": each band is a different blend of the scene's sunlit and shaded features, offset towards the sun by "
          "amounts that follow the scene's large features, and where the pairs see the attitude through about "

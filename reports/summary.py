@@ -279,6 +279,58 @@ def scene_offset_line_of_run(run, axes) -> str | None:
     return scene_offset_line(ds.attrs if ds is not None else {}, taus, axes, eph)
 
 
+#: the knowledge filter's line is said when its error below the high-pass is at least this on some axis [px]
+KNOWLEDGE_FILTER_SHOWN_PX = 0.01
+
+
+def knowledge_filter_line(product_attrs, restoration, axes) -> str | None:
+    """The line saying how much of the AOCS filter's own error stays in the restored angle below the high-pass
+    (:func:`restore.observability.knowledge_filter_error_below`, which σ holds:
+    :func:`restore.stages.raise_by_knowledge_filter`), where it is at least :data:`KNOWLEDGE_FILTER_SHOWN_PX` on
+    some axis, with a causal filter's lag; else None.
+
+    ``product_attrs``: product.nc's attributes (the knowledge's filter); ``restoration``: restoration.nc (the
+    knowledge at the lines, each axis's high-pass)."""
+    import json
+
+    from restore.knowledge_prior import knowledge_response
+    from restore.observability import knowledge_filter_error_below
+
+    at = dict(product_attrs or {})
+    if restoration is None or "knowledge_cutoff_hz" not in at or "knowledge_filter_order" not in at \
+            or "integration" not in restoration.attrs or "pixel_ifov_rad" not in restoration.attrs:
+        return None
+    integ = json.loads(restoration.attrs["integration"])
+    cutoff, order = float(at["knowledge_cutoff_hz"]), int(at["knowledge_filter_order"])
+    kind = str(at.get("knowledge_filter", "butterworth_zero_phase"))
+    px = float(restoration.attrs["pixel_ifov_rad"])
+    found = []
+    for a in axes:
+        if a == "yaw" or a not in integ or f"knowledge_{a}" not in restoration:
+            continue
+        e = knowledge_filter_error_below(np.asarray(restoration[f"knowledge_{a}"].values, dtype=np.float64),
+                                         float(integ[a]["line_period_s"]), highpass_hz=float(integ[a]["highpass_hz"]),
+                                         cutoff_hz=cutoff, order=order, kind=kind)
+        found.append((a, e / px, float(integ[a]["highpass_hz"])))
+    if not found or max(v for _, v, _ in found) < KNOWLEDGE_FILTER_SHOWN_PX:
+        return None
+    f0 = 1e-3 * cutoff
+    lag = -float(np.angle(complex(np.atleast_1d(knowledge_response(np.array([f0]), cutoff, order, kind))[0]))) \
+        / (2 * np.pi * f0)
+    what = f"its causal filter lags the attitude by {lag:.2f} s" if lag > 1e-4 else "its filter's own error"
+    return (f"  below the high-pass ({found[0][2]:.2f} Hz) the restored angle is the AOCS knowledge, and {what}: "
+            + ", ".join(f"{a} {v:.3f} px" for a, v, _ in found)
+            + " there, not restored (σ holds it)")
+
+
+def knowledge_filter_line_of_run(run, axes) -> str | None:
+    """:func:`knowledge_filter_line` of a loaded run (None without a restoration or a product)."""
+    ds = getattr(run.product, "ds", None) if getattr(run, "product", None) is not None else None
+    if run.restoration is None or ds is None:
+        return None
+    return knowledge_filter_line(ds.attrs, run.restoration, axes)
+
+
 #: the notch line is said when the low bridge costs at least this much on some axis [px]
 NOTCH_CONTINUUM_SHOWN_PX = 0.01
 
@@ -381,6 +433,9 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
     offset = scene_offset_line_of_run(run, axes_r)
     if offset:
         lines.append(offset)
+    lag = knowledge_filter_line_of_run(run, axes_r)
+    if lag:
+        lines.append(lag)
     for notch in (notch_level_line(run.restoration, axes_r), notch_continuum_line_of_run(run, axes_r)):
         if notch:
             lines.append(notch)

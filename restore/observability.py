@@ -63,7 +63,7 @@ import numpy as np
 from .integration.transfer import fused_snr
 
 __all__ = ["Observability", "fused_snr", "observability", "record_observability", "band_power", "record_trend",
-           "scene_offset_band", "sun_offset_shares", "offset_misfit", "OFFSET_MISFIT", "NotchContinuum",
+           "scene_offset_band", "knowledge_filter_error_below", "sun_offset_shares", "offset_misfit", "OFFSET_MISFIT", "NotchContinuum",
            "notch_continuum", "record_notch_continuum", "wiener_error"]
 
 
@@ -304,6 +304,48 @@ def scene_offset_band(taus, knowledge_cutoff_hz) -> tuple[float, float] | None:
     high = float(f[max(int(np.argmax(over)) - 1, 0)] if over.any() else f[-1])   # the last within the misfit
     lo = float(knowledge_cutoff_hz)
     return (lo, high) if lo < high else None
+
+
+def knowledge_filter_error_below(knowledge, dt: float, *, highpass_hz: float, cutoff_hz: float, order: int,
+                                 kind: str) -> float:
+    """RMS [rad] of the AOCS filter's own error that stays in the restored angle below the high-pass, its linear
+    trend removed (as the accuracy metric removes it).
+
+    Below ``highpass_hz`` the restored angle is the (smoothed) knowledge ``k = F θ + n``: its noise is in σ, but
+    the filter's own error ``(1 − F) θ`` is not — nothing for a zero-phase Butterworth well below its cut-off,
+    the lag of a causal one (a 4th-order Butterworth lags by ``2.61 / (2π f_c)``: 0.10 s at 4 Hz, 30° at a
+    0.8 Hz high-pass). Estimated from the knowledge itself: ``k`` through ``(1 − F) / F`` where the filter passes
+    at least half the attitude (0 beyond, where the high-pass's complement passes nothing anyway) and through the
+    complement of the high-pass, on the record extended by its mirror image. The knowledge's noise passes
+    through that filter too (``|1 − F|`` of it, small where ``|F| ≈ 1``).
+
+    Parameters
+    ----------
+    knowledge : ndarray (lines,)
+        The knowledge at the lines [rad].
+    dt, highpass_hz : float
+        Line period [s] and the restoration's high-pass on this axis [Hz].
+    cutoff_hz, order, kind
+        The knowledge's filter as product.nc records it.
+    """
+    from .knowledge_prior import knowledge_response
+    from .synthesis import highpass_gain
+
+    k = np.asarray(knowledge, dtype=np.float64)
+    n = k.size
+    if n < 8 or not np.all(np.isfinite(k)) or not highpass_hz > 0:
+        return 0.0
+    u = np.linspace(-1.0, 1.0, n)
+    x = k - np.polyval(np.polyfit(u, k, 1), u)
+    xe = np.concatenate([x, x[::-1]])
+    f = np.fft.rfftfreq(2 * n, dt)
+    g = knowledge_response(f, cutoff_hz, order, kind)
+    strong = np.abs(g) >= 0.5
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(strong, (1.0 - g) / np.where(strong, g, 1.0), 0.0)
+    e = np.fft.irfft(np.fft.rfft(xe) * r * (1.0 - highpass_gain(f, highpass_hz)), 2 * n)[:n]
+    e = e - np.polyval(np.polyfit(u, e, 1), u)
+    return float(np.sqrt(np.mean(e ** 2)))
 
 
 def sun_offset_shares(sun_azimuth_deg: float, track_azimuth_deg: float = 0.0) -> dict:

@@ -145,3 +145,84 @@ def test_a_notch_bridged_below_its_sides_continuum_is_found_with_the_error_it_ad
     # below the high-pass a notch is the AOCS knowledge's
     f, s, sigma, taus, dt, _ = _phr_prior(1e-14, 1e-17)
     assert notch_continuum(f, s, sigma, taus, dt, highpass_hz=f[-1] + 1.0) == []
+
+
+def _lagged_knowledge(f0, kind, amp=4e-6, n=4000, dt=4e-4, cutoff=4.0):
+    """The knowledge of a sine attitude through the recorded filter (its gain and phase at ``f0``), and the
+    restored angle's error below a 0.8 Hz high-pass were the knowledge taken for the attitude there: the low-pass
+    complement of ``(1 − F) θ``, its linear trend removed."""
+    from restore.knowledge_prior import knowledge_response
+    from restore.synthesis import highpass_gain
+
+    t = np.arange(n) * dt
+    u = np.linspace(-1, 1, n)
+    g = complex(np.atleast_1d(knowledge_response(np.array([f0]), cutoff, 4, kind))[0])
+    k = amp * abs(g) * np.sin(2 * np.pi * f0 * t + np.angle(g) + 0.3)
+    h = 1 - g
+    e = float(1 - highpass_gain(f0, 0.8)) * abs(h) * amp * np.sin(2 * np.pi * f0 * t + np.angle(h) + 0.3)
+    e = e - np.polyval(np.polyfit(u, e, 1), u)
+    return k, float(np.sqrt(np.mean(e ** 2)))
+
+
+@pytest.mark.parametrize("f0", [0.6, 1.0, 1.6, 2.2])
+def test_a_causal_filters_lag_below_the_highpass_is_estimated_from_the_knowledge(f0):
+    """A 4 Hz causal 4th-order Butterworth lags a sine at 0.6–2.2 Hz by 0.10 s: below a 0.8 Hz high-pass the
+    knowledge, taken for the attitude, errs by the low-pass complement of ``(1 − F) θ``; estimated from the
+    knowledge alone within 40 % (the record holds 1–3.5 cycles). A zero-phase filter's error there is nothing."""
+    from restore.observability import knowledge_filter_error_below
+
+    k, truth = _lagged_knowledge(f0, "butterworth_causal")
+    est = knowledge_filter_error_below(k, 4e-4, highpass_hz=0.8, cutoff_hz=4.0, order=4, kind="butterworth_causal")
+    assert est == pytest.approx(truth, rel=0.4)
+    kz, _ = _lagged_knowledge(f0, "butterworth_zero_phase")
+    assert knowledge_filter_error_below(kz, 4e-4, highpass_hz=0.8, cutoff_hz=4.0, order=4,
+                                        kind="butterworth_zero_phase") < 1e-3 * 4e-6
+    assert knowledge_filter_error_below(k, 4e-4, highpass_hz=0.0, cutoff_hz=4.0, order=4,
+                                        kind="butterworth_causal") == 0.0
+
+
+def test_sigma_takes_the_knowledge_filters_error_below_the_highpass_and_the_report_says_it():
+    """stages.raise_by_knowledge_filter adds the estimate in quadrature on every line (model_sigma keeps the σ
+    before it); a zero-phase knowledge adds nothing worth a digit; a product without its filter, nothing. The
+    report's line names the lag and the figure when it reaches 0.01 px."""
+    from types import SimpleNamespace
+
+    import xarray as xr
+
+    from reports.summary import knowledge_filter_line
+    from restore.observability import knowledge_filter_error_below
+    from restore.posterior import PosteriorSigma
+    from restore.stages import raise_by_knowledge_filter
+    from simsat.attitude import AttitudeSeries
+
+    n, dt = 4000, 4e-4
+    t = np.arange(n) * dt
+    k, _ = _lagged_knowledge(1.0, "butterworth_causal")
+    attrs = {"knowledge_cutoff_hz": 4.0, "knowledge_filter_order": 4, "knowledge_filter": "butterworth_causal"}
+    product = SimpleNamespace(ds=SimpleNamespace(attrs=attrs), time=t,
+                              knowledge=AttitudeSeries(t, np.zeros(n), k, np.zeros(n)))
+    records = {"pitch": SimpleNamespace(line_period_s=dt, highpass_hz=0.8)}
+    sig = np.full(n, 1e-8)
+    ps = PosteriorSigma(sigma=sig, noise_scale=1.0, samples=2, detrended_rms=1e-8, detrended_sigma=sig,
+                        error_power=np.zeros(n // 2 + 1))
+    out = raise_by_knowledge_filter({"pitch": ps}, records, product)
+    e = knowledge_filter_error_below(k, dt, highpass_hz=0.8, cutoff_hz=4.0, order=4, kind="butterworth_causal")
+    assert e > 1e-7
+    np.testing.assert_allclose(out["pitch"].sigma, np.sqrt(sig ** 2 + e ** 2), rtol=1e-12)
+    assert out["pitch"].detrended_rms == pytest.approx(np.sqrt(1e-16 + e ** 2))
+    np.testing.assert_array_equal(out["pitch"].model_sigma, sig)
+    kz, _ = _lagged_knowledge(1.0, "butterworth_zero_phase")
+    zero = SimpleNamespace(ds=SimpleNamespace(attrs={**attrs, "knowledge_filter": "butterworth_zero_phase"}), time=t,
+                           knowledge=AttitudeSeries(t, np.zeros(n), kz, np.zeros(n)))
+    assert raise_by_knowledge_filter({"pitch": ps}, records, zero)["pitch"].detrended_rms == pytest.approx(1e-8, rel=1e-3)
+    bare = SimpleNamespace(ds=SimpleNamespace(attrs={"knowledge_cutoff_hz": 4.0}), time=t, knowledge=product.knowledge)
+    assert raise_by_knowledge_filter({"pitch": ps}, records, bare)["pitch"] is ps
+    # the report's line, from restoration.nc's knowledge and high-pass (a 4 µrad pixel)
+    import json
+    rs = xr.Dataset({"knowledge_pitch": ("time", k)}, coords={"time": t},
+                    attrs={"pixel_ifov_rad": 4e-6,
+                           "integration": json.dumps({"pitch": {"line_period_s": dt, "highpass_hz": 0.8}})})
+    line = knowledge_filter_line(attrs, rs, ["pitch"])
+    assert line is not None and "0.10 s" in line and f"pitch {e / 4e-6:.3f} px" in line
+    rz = rs.assign(knowledge_pitch=("time", kz))
+    assert knowledge_filter_line({**attrs, "knowledge_filter": "butterworth_zero_phase"}, rz, ["pitch"]) is None
