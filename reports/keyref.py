@@ -182,6 +182,12 @@ MEANING = {
     "restoration.knowledge_noise_floor": "keep the estimated prior PSD at least at the AOCS knowledge's own white "
     "noise (σ_k² / f_k through the spline interpolation, below f_k / 2, as product.nc records them): the "
     "knowledge's error holds that noise whatever the attitude does; with restoration.knowledge_prior. Off by default (see highpass_per_axis)",
+    "restoration.knowledge_dephasing": "a knowledge product.nc records as causally filtered (knowledge_filter = "
+                                       "butterworth_causal) has its filter's phase taken out before anything uses it: "
+                                       "an all-pass e^(−i arg F) on its samples, extended by their point reflection; "
+                                       "the restoration then reads it as a zero-phase filter of gain |F|. The lag "
+                                       "(0.10 s at a 4 Hz cut-off) is gone but over the record's last group delay; "
+                                       "the latency is not (it is not recorded)",
     "restoration.knowledge_smoothing": "below the high-pass, where the restored angle is the AOCS knowledge's, "
     "take its white noise out: a quadratic kept whole, then each DCT coefficient of the knowledge samples' rest "
     "shrunk by the empirical Wiener gain max(0, 1 − σ_k² / P̄) (P̄: the power of five neighbouring coefficients; "

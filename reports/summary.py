@@ -303,12 +303,19 @@ def knowledge_filter_line(product_attrs, restoration, axes) -> str | None:
     integ = json.loads(restoration.attrs["integration"])
     cutoff, order = float(at["knowledge_cutoff_hz"]), int(at["knowledge_filter_order"])
     kind = str(at.get("knowledge_filter", "butterworth_zero_phase"))
+    dephased = any(f"knowledge_dephasing_{a}" in restoration for a in axes)
+    if dephased:  # the restoration took the causal phase out first (restore.knowledge_dephasing)
+        from restore.knowledge_dephasing import DEPHASABLE_KINDS
+        kind = DEPHASABLE_KINDS.get(kind, kind)
     px = float(restoration.attrs["pixel_ifov_rad"])
     found = []
     for a in axes:
         if a == "yaw" or a not in integ or f"knowledge_{a}" not in restoration:
             continue
-        e = knowledge_filter_error_below(np.asarray(restoration[f"knowledge_{a}"].values, dtype=np.float64),
+        used = np.asarray(restoration[f"knowledge_{a}"].values, dtype=np.float64)
+        if f"knowledge_dephasing_{a}" in restoration:
+            used = used + np.asarray(restoration[f"knowledge_dephasing_{a}"].values, dtype=np.float64)
+        e = knowledge_filter_error_below(used,
                                          float(integ[a]["line_period_s"]), highpass_hz=float(integ[a]["highpass_hz"]),
                                          cutoff_hz=cutoff, order=order, kind=kind)
         found.append((a, e / px, float(integ[a]["highpass_hz"])))
@@ -317,7 +324,8 @@ def knowledge_filter_line(product_attrs, restoration, axes) -> str | None:
     f0 = 1e-3 * cutoff
     lag = -float(np.angle(complex(np.atleast_1d(knowledge_response(np.array([f0]), cutoff, order, kind))[0]))) \
         / (2 * np.pi * f0)
-    what = f"its causal filter lags the attitude by {lag:.2f} s" if lag > 1e-4 else "its filter's own error"
+    what = f"its causal filter lags the attitude by {lag:.2f} s" if lag > 1e-4 else \
+        "its filter's own error (its causal phase taken out)" if dephased else "its filter's own error"
     return (f"  below the high-pass ({found[0][2]:.2f} Hz) the restored angle is the AOCS knowledge, and {what}: "
             + ", ".join(f"{a} {v:.3f} px" for a, v, _ in found)
             + " there, not restored (σ holds it)")

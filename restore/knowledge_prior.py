@@ -44,9 +44,13 @@ def knowledge_response(freq, cutoff_hz: float, order: int, kind: str = "butterwo
     """Complex response of the knowledge's filter at ``freq`` [Hz].
 
     ``butterworth_zero_phase``: :func:`knowledge_gain` (real); ``butterworth_causal``: the Butterworth run
-    forward only (its analogue prototype: modulus ``1 / √(1 + (f/f_c)^(2N))`` and a phase lag).
+    forward only (its analogue prototype: modulus ``1 / √(1 + (f/f_c)^(2N))`` and a phase lag);
+    ``butterworth_dephased``: the causal one with its phase taken out (:mod:`restore.knowledge_dephasing`), the
+    causal modulus with no phase (real).
     """
     f = np.abs(np.asarray(freq, dtype=np.float64))
+    if kind == "butterworth_dephased":
+        return np.abs(knowledge_response(f, cutoff_hz, order, "butterworth_causal")).astype(complex)
     if kind == "butterworth_causal":
         from scipy.signal import butter, freqs
 

@@ -213,6 +213,11 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
                 "time", res.knowledge_smoothing[a],
                 {"units": "rad", "long_name": f"part of correction_{a} that smooths the AOCS knowledge's noise below "
                                               "the high-pass (restore.knowledge_smoothing)"})
+        if a in res.knowledge_dephasing:
+            data[f"knowledge_dephasing_{a}"] = (
+                "time", res.knowledge_dephasing[a],
+                {"units": "rad", "long_name": f"part of correction_{a} that takes the causal AOCS filter's phase out "
+                                              "of the knowledge (restore.knowledge_dephasing)"})
     names = [p.name for p in res.pairs]
     for k, a in enumerate(AXES):
         data[f"diff_{a}"] = (("pair", "time"), np.stack([p.synthesis.diff[:, k] for p in res.pairs]),
@@ -391,6 +396,8 @@ def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult
         yaw_roll_coupling=float(ds.attrs.get("yaw_roll_coupling", 0.0)),
         knowledge_smoothing={a: _values(ds, f"knowledge_smoothing_{a}") for a in AXES
                              if f"knowledge_smoothing_{a}" in ds.variables},
+        knowledge_dephasing={a: _values(ds, f"knowledge_dephasing_{a}") for a in AXES
+                             if f"knowledge_dephasing_{a}" in ds.variables},
         knowledge_checks=_knowledge_checks_from(ds), knowledge_fusion=_knowledge_fusion_from(ds))
 
 

@@ -108,6 +108,8 @@ class Restorer:
         """
         s = self.settings = self._settings_for(product)
         self._axis_highpass = {}
+        recorded, (product, dephasing) = product, stages.dephased_knowledge(product, s)
+        recorded_knowledge = dict(zip(AXES, recorded.knowledge.at(recorded.time)))
         t_all = _time.perf_counter()
         timings: dict = {}
         pairs_ab = stages.resolve_pairs(product, s)
@@ -146,8 +148,7 @@ class Restorer:
             estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad,
                                                       flag_limits)
             estimate = stages.undo_exposure(estimate, product, s)
-            correction = stages.remove_mean({a: estimate[a] + smoothing.get(a, 0.0) for a in AXES}, s.axes)
-            restored = {a: knowledge[a] + correction[a] for a in AXES}
+            correction, restored = stages.restored_from(recorded_knowledge, estimate, (smoothing, dephasing), s.axes)
             anchored = False
             if s.anchor_star_tracker:
                 anchor_sigma = stages.anchoring_sigma(restored, product.time, product.star_tracker, s.axes,
@@ -160,7 +161,7 @@ class Restorer:
             t = _time.perf_counter()
             corrected, misreg = None, {}
             if s.correct_images:
-                corrected, misreg = stages.correct_images(product, product.time, restored, knowledge, pairs, s,
+                corrected, misreg = stages.correct_images(recorded, product.time, restored, knowledge, pairs, s,
                                                           path=corrected_path, attrs=corrected_attrs)
             timings["correction_s"] = _time.perf_counter() - t
             bar.step("corrected")
@@ -171,7 +172,7 @@ class Restorer:
         timings["lines_per_s"] = product.time.size / timings["total_s"]
         timings["matches_per_s"] = n_matches / max(timings["matching_s"], 1e-9)
         timings["matches"] = n_matches
-        return RestorationResult(run_dir=run_dir, time=product.time, restored=restored, knowledge=knowledge,
+        return RestorationResult(run_dir=run_dir, time=product.time, restored=restored, knowledge=recorded_knowledge,
                                  correction=correction, coverage=coverage, pairs=pairs, timings=timings,
                                  misregistration=misreg, settings=s, pixel_ifov_rad=product.pixel_ifov_rad,
                                  method=resolved_method_name(s.method), integration=records,
@@ -183,7 +184,7 @@ class Restorer:
                                  detrended_rms={a: detrended_rms_over(ps, restored[a]) for a, ps in sigma.items()},
                                  yaw_pitch_coupling=stages.yaw_pitch_coupling(pairs),
                                  yaw_roll_coupling=stages.yaw_coupling(pairs, "roll"),
-                                 knowledge_smoothing=smoothing, knowledge_checks=checks,
+                                 knowledge_smoothing=smoothing, knowledge_dephasing=dephasing, knowledge_checks=checks,
                                  knowledge_fusion=fusions)
 
     def _settings_for(self, product: Product) -> RestorationSettings:

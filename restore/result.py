@@ -149,6 +149,9 @@ class RestorationResult:
     #: per restored axis: what the smoothing of the AOCS knowledge below the high-pass added to the correction
     #: [rad] (:mod:`restore.knowledge_smoothing`); empty when it was off or not recorded
     knowledge_smoothing: dict = field(default_factory=dict)
+    #: ``{axis: (line,)}``: the part of ``correction`` that takes a causal AOCS filter's phase out of the knowledge
+    #: [rad] (:mod:`restore.knowledge_dephasing`); empty when it was off or the filter has no phase
+    knowledge_dephasing: dict = field(default_factory=dict)
     #: per axis checked: the restored angle against the smoothed knowledge
     #: (:class:`restore.knowledge_check.KnowledgeCheck`); its ``excess_rad2`` is in ``sigma``
     knowledge_checks: dict = field(default_factory=dict)

@@ -52,7 +52,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_error_prior", "knowledge_filter_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_error_prior", "knowledge_filter_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -847,6 +847,43 @@ def colour_weighted(record: IntegrationRecord, colour, ceiling=None) -> Integrat
     return replace(weighted, increment=weighted.rerun())
 
 
+def dephased_knowledge(product: Product, settings: RestorationSettings) -> tuple[Product, dict]:
+    """The product with its AOCS knowledge's causal phase taken out (:mod:`restore.knowledge_dephasing`), and
+    ``{axis: (line,)}``, the dephased knowledge less the recorded one at the lines [rad], to add to the
+    correction (the restored angle is the recorded knowledge plus the correction).
+
+    The returned product's knowledge is the dephased series and its ``knowledge_filter`` reads
+    ``butterworth_dephased`` (a zero-phase filter of gain ``|F|``), so that everything after — the matches'
+    prediction, the prior's ceiling, the conditioning, the checks, the fusion, σ — reads a zero-phase knowledge.
+    Unchanged (and ``{}``) with ``knowledge_dephasing`` off, a filter with no phase to take out, a product that
+    does not record its filter, or knowledge samples not on a regular grid.
+    """
+    from .knowledge_dephasing import DEPHASABLE_KINDS, dephase_samples
+
+    attrs = product.ds.attrs
+    kind = str(attrs.get("knowledge_filter", "butterworth_zero_phase"))
+    if not settings.knowledge_dephasing or kind not in DEPHASABLE_KINDS or "knowledge_cutoff_hz" not in attrs \
+            or "knowledge_filter_order" not in attrs:
+        return product, {}
+    kn = product.knowledge
+    tk = np.asarray(kn.time, dtype=np.float64)
+    if tk.size < 3:
+        return product, {}
+    step = np.diff(tk)
+    dt = float(np.median(step))
+    if not np.all(np.abs(step - dt) <= 1e-6 * dt):
+        return product, {}
+    cutoff, order = float(attrs["knowledge_cutoff_hz"]), int(attrs["knowledge_filter_order"])
+    series = AttitudeSeries(tk, *(dephase_samples(getattr(kn, a), dt, cutoff_hz=cutoff, order=order, kind=kind)
+                                  for a in AXES))
+    ds = product.ds.copy(deep=False)
+    ds.attrs = {**dict(attrs), "knowledge_filter": DEPHASABLE_KINDS[kind], "knowledge_filter_recorded": kind}
+    out = replace(product, ds=ds, knowledge=series)
+    t = product.time
+    before, after = product.knowledge.at(t), series.at(t)
+    return out, {a: np.asarray(after[i] - before[i], dtype=np.float64) for i, a in enumerate(AXES)}
+
+
 def knowledge_smoothings(product: Product, settings: RestorationSettings, axes) -> dict:
     """``{axis: KnowledgeSmoothing}`` of the AOCS knowledge samples of ``axes`` (times from the record's first
     line; :mod:`restore.knowledge_smoothing`); empty with ``knowledge_smoothing`` off or a product that does
@@ -1203,6 +1240,14 @@ def remove_mean(estimate: dict, axes) -> dict:
         if m.any():
             out[a] = out[a] - np.mean(out[a][m])
     return out
+
+
+def restored_from(knowledge: dict, estimate: dict, parts, axes) -> tuple[dict, dict]:
+    """``(correction, restored)``: the estimate plus each of ``parts`` (``{axis: (line,)}``: the knowledge's
+    smoothing, its dephasing), its mean removed on ``axes`` (:func:`remove_mean`), and the recorded
+    ``knowledge`` plus that correction [rad]."""
+    correction = remove_mean({a: estimate[a] + sum(p.get(a, 0.0) for p in parts) for a in AXES}, axes)
+    return correction, {a: knowledge[a] + correction[a] for a in AXES}
 
 
 def _anchor_samples(values: np.ndarray, t_line: np.ndarray, star_tracker, axis: str):

@@ -418,6 +418,10 @@ class _AxisBudget:
         smooth_name = f"knowledge_smoothing_{a}"
         smoothed = smooth_name in self.run.restoration.variables
         given = th_true + (np.asarray(self.run.restoration[smooth_name].values, dtype=np.float64) if smoothed else 0.0)
+        # and so is the causal filter's phase taken out of the knowledge (restore.knowledge_dephasing)
+        dephase_name = f"knowledge_dephasing_{a}"
+        if dephase_name in self.run.restoration.variables:
+            given = given + np.asarray(self.run.restoration[dephase_name].values, dtype=np.float64)
         eint = _centred(np.where(mask, given - remaining, np.nan))
         anchored = bool(int(self.run.restoration.attrs.get("anchored_on_star_tracker", 0)))
         total = _centred(att[f"restored_{a}"] - att[f"true_{a}"])

@@ -226,3 +226,13 @@ def test_sigma_takes_the_knowledge_filters_error_below_the_highpass_and_the_repo
     assert line is not None and "0.10 s" in line and f"pitch {e / 4e-6:.3f} px" in line
     rz = rs.assign(knowledge_pitch=("time", kz))
     assert knowledge_filter_line({**attrs, "knowledge_filter": "butterworth_zero_phase"}, rz, ["pitch"]) is None
+    # a restoration that took the causal phase out first (restore.knowledge_dephasing): the line reads the
+    # knowledge it used, as the zero-phase filter of gain |F| it became; the lag is gone from it
+    from restore.knowledge_dephasing import dephase_samples
+
+    kd = dephase_samples(k, dt, cutoff_hz=4.0, order=4)
+    rd = rs.assign(knowledge_dephasing_pitch=("time", kd - k))
+    ed = knowledge_filter_error_below(kd, dt, highpass_hz=0.8, cutoff_hz=4.0, order=4, kind="butterworth_dephased")
+    assert ed < 0.2 * e
+    line_d = knowledge_filter_line(attrs, rd, ["pitch"])
+    assert line_d is None if ed / 4e-6 < 0.01 else ("lags" not in line_d and f"pitch {ed / 4e-6:.3f} px" in line_d)

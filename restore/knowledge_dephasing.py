@@ -1,0 +1,114 @@
+"""A causal AOCS knowledge with its filter's phase taken out: the lag gone, the knowledge a zero-phase one.
+
+A ground segment knows its AOCS filter (product.nc records it). When that
+filter runs forward only (``butterworth_causal``: a 4th-order Butterworth), the
+knowledge ``k = F θ + n`` lags the attitude by the filter's group delay,
+``2.61 / (2π f_c)`` at low frequencies (0.10 s at a 4 Hz cut-off: 30° at a
+0.8 Hz high-pass). The restoration takes the knowledge for the attitude below
+its high-pass, and predicts matches, bounds its prior and fuses bands with it:
+every one of those assumes a zero-phase knowledge.
+
+The phase is known, so it can be taken out without amplifying anything: the
+all-pass ``e^{−i arg F(f)}`` applied to the samples leaves the noise's power
+where it was and turns the knowledge into ``|F| θ + n′``, a zero-phase filter of
+gain ``|F|`` (:func:`restore.knowledge_prior.knowledge_response` kind
+``butterworth_dephased``). An all-pass is not causal: near the record's end it
+needs the knowledge of the next group delay, which does not exist. The samples
+are extended at both ends by their point reflection (``2 k(T) − k(2T − t)``,
+which continues the record's slope: a linear extrapolation, exact for a trend,
+``s² θ''`` for a curvature over ``s`` past the end) over a few filter time
+constants, a straight line through the extension's two ends is taken out so
+that the periodic FFT sees no jump, and added back advanced by the group
+delay at zero frequency (what the all-pass does to a line).
+
+What stays is the latency (``delay_ms``: not recorded, so not known) and the
+extrapolation over the record's last group delay.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["DEPHASED_KIND", "DEPHASABLE_KINDS", "EXTENSION_TIME_CONSTANTS", "group_delay_at_zero",
+           "dephase_samples"]
+
+#: the kind product.nc's ``knowledge_filter`` reads once the knowledge is dephased
+DEPHASED_KIND = "butterworth_dephased"
+#: the recorded filters whose phase :func:`dephase_samples` takes out, and the kind each becomes
+DEPHASABLE_KINDS = {"butterworth_causal": DEPHASED_KIND}
+#: the extension at each end, in time constants ``1 / f_c`` of the filter (the all-pass's response has
+#: decayed to under 1e-3 of its peak by 8 of them for a 4th-order Butterworth)
+EXTENSION_TIME_CONSTANTS = 8.0
+
+
+def _phase(freq, cutoff_hz: float, order: int, kind: str) -> np.ndarray:
+    from .knowledge_prior import knowledge_response
+
+    return np.angle(knowledge_response(freq, cutoff_hz, order, kind))
+
+
+def group_delay_at_zero(cutoff_hz: float, order: int, kind: str = "butterworth_causal") -> float:
+    """The filter's group delay at zero frequency [s] (``−d arg F / dω``; 0 for a zero-phase filter).
+
+    Examples
+    --------
+    >>> round(group_delay_at_zero(4.0, 4), 4)   # 2.6131 / (2π · 4 Hz)
+    0.104
+    """
+    f0 = 1e-4 * float(cutoff_hz)
+    return float(-_phase(np.array([f0]), cutoff_hz, order, kind)[0] / (2 * np.pi * f0))
+
+
+def dephase_samples(values, dt: float, *, cutoff_hz: float, order: int,
+                    kind: str = "butterworth_causal") -> np.ndarray:
+    """The knowledge samples through the all-pass ``e^{−i arg F}`` of their recorded filter.
+
+    Parameters
+    ----------
+    values : ndarray (n,)
+        Knowledge samples of one axis on a regular grid [rad]; NaN marks a missing sample (bridged linearly
+        for the filtering, NaN again in the result).
+    dt : float
+        Sampling interval [s].
+    cutoff_hz, order, kind
+        The knowledge's filter as product.nc records it (a kind of :data:`DEPHASABLE_KINDS`).
+
+    Returns
+    -------
+    ndarray (n,)
+        ``|F| θ`` plus the noise, all-passed [rad]: the lag gone but over the record's last group delay.
+
+    Examples
+    --------
+    A slow sine lagged by a causal 4 Hz filter comes back in phase:
+
+    >>> from scipy.signal import butter, sosfilt
+    >>> dt = 1 / 64; t = np.arange(-4, 2, dt); x = np.sin(2 * np.pi * 0.5 * t)
+    >>> k = sosfilt(butter(4, 4.0, fs=1 / dt, output="sos"), x)[t >= 0]
+    >>> d = dephase_samples(k, dt, cutoff_hz=4.0, order=4)
+    >>> bool(np.max(np.abs(k - x[t >= 0])) > 0.3), bool(np.max(np.abs(d - x[t >= 0])[:96]) < 0.01)
+    (True, True)
+    """
+    if kind not in DEPHASABLE_KINDS:
+        raise ValueError(f"kind: {kind!r} has no phase to take out (known: {sorted(DEPHASABLE_KINDS)})")
+    if not (dt > 0 and cutoff_hz > 0):
+        raise ValueError(f"dt and cutoff_hz must be > 0, got {dt}, {cutoff_hz}")
+    v = np.asarray(values, dtype=np.float64)
+    n = v.size
+    ok = np.isfinite(v)
+    if n < 3 or np.count_nonzero(ok) < 2:
+        return v.copy()
+    i = np.arange(n)
+    x = np.where(ok, v, np.interp(i, i[ok], v[ok]))
+    m = int(min(n - 1, np.ceil(EXTENSION_TIME_CONSTANTS / (cutoff_hz * dt))))
+    head = 2 * x[0] - x[m:0:-1]
+    tail = 2 * x[-1] - x[-2:-m - 2:-1]
+    xe = np.concatenate([head, x, tail])
+    ne = xe.size
+    te = (np.arange(ne) - m) * dt
+    slope = (xe[-1] - xe[0]) / (te[-1] - te[0])
+    line = xe[0] + slope * (te - te[0])
+    f = np.fft.rfftfreq(ne, dt)
+    rotated = np.fft.irfft(np.fft.rfft(xe - line) * np.exp(-1j * _phase(f, cutoff_hz, order, kind)), ne)
+    advance = group_delay_at_zero(cutoff_hz, order, kind)
+    out = (rotated + line + slope * advance)[m:m + n]
+    return np.where(ok, out, np.nan)
