@@ -188,6 +188,12 @@ MEANING = {
                                        "the restoration then reads it as a zero-phase filter of gain |F|. The lag "
                                        "(0.10 s at a 4 Hz cut-off) is gone but over the record's last group delay; "
                                        "the latency is not (it is not recorded)",
+    "restoration.knowledge_timing": "measure the AOCS knowledge's latency from the images (each pair's "
+                                    "differentials of what the knowledge misses, regressed on those of its "
+                                    "derivative, from the high-pass to where its filter passes 90 %; σ by a "
+                                    "jackknife) and, where it is 4 σ or more, advance the knowledge by it and "
+                                    "integrate again. A latency the knowledge does not record is an error the "
+                                    "prior's ceiling, the low band and the conditioning all take for known",
     "restoration.knowledge_smoothing": "below the high-pass, where the restored angle is the AOCS knowledge's, "
     "take its white noise out: a quadratic kept whole, then each DCT coefficient of the knowledge samples' rest "
     "shrunk by the empirical Wiener gain max(0, 1 − σ_k² / P̄) (P̄: the power of five neighbouring coefficients; "

@@ -518,10 +518,16 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
                 "power the knowledge's error has there (a drift at a record end or a gap edge, from band offsets "
                 "that move like an attitude); σ holds the combination's error on those lines "
                 "(restoration.knowledge_fusion).")
-    from .summary import (knowledge_filter_line_of_run, notch_continuum_line_of_run, notch_level_line,
-                          scene_offset_line_of_run)
+    from .summary import (knowledge_filter_line_of_run, knowledge_timing_line, notch_continuum_line_of_run,
+                          notch_level_line, scene_offset_line_of_run)
 
     explained = (
+        (knowledge_timing_line(run.restoration),
+         ". Where both the images and the knowledge see the attitude (above the high-pass, where the knowledge's "
+         "filter passes 90 % or more), the attitude the knowledge misses is, to first order, its latency times "
+         "its rate: each pair's differentials of it were regressed on those of the knowledge's derivative, the "
+         "σ a jackknife over eight stretches of the record, and the knowledge advanced where the latency was "
+         "four σ or more (restore.knowledge_timing)."),
         (knowledge_filter_line_of_run(run, list(unc)),
          ". Below the high-pass the images' estimate is discarded (the differentials see little there and a band's "
          "slow bias would pass for attitude) and the restored angle is the knowledge: its noise is smoothed and "

@@ -331,6 +331,21 @@ def knowledge_filter_line(product_attrs, restoration, axes) -> str | None:
             + " there, not restored (σ holds it)")
 
 
+def knowledge_timing_line(restoration) -> str | None:
+    """The line saying the AOCS knowledge's latency the images measured and took out
+    (:mod:`restore.knowledge_timing`), where it was significant; else None."""
+    import json
+
+    if restoration is None:
+        return None
+    est = json.loads(restoration.attrs.get("knowledge_latency", "{}") or "{}")
+    if not est or not est.get("significant"):
+        return None
+    lo, hi = est["band_hz"]
+    return (f"  the AOCS knowledge was {est['delay_s'] * 1e3:.1f} ± {est['sigma_s'] * 1e3:.1f} ms late against the "
+            f"images ({', '.join(est['axes'])} at {lo:.2f}–{hi:.2f} Hz): advanced by that before it was used")
+
+
 def knowledge_filter_line_of_run(run, axes) -> str | None:
     """:func:`knowledge_filter_line` of a loaded run (None without a restoration or a product)."""
     ds = getattr(run.product, "ds", None) if getattr(run, "product", None) is not None else None
@@ -441,9 +456,9 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
     offset = scene_offset_line_of_run(run, axes_r)
     if offset:
         lines.append(offset)
-    lag = knowledge_filter_line_of_run(run, axes_r)
-    if lag:
-        lines.append(lag)
+    for lag in (knowledge_timing_line(run.restoration), knowledge_filter_line_of_run(run, axes_r)):
+        if lag:
+            lines.append(lag)
     for notch in (notch_level_line(run.restoration, axes_r), notch_continuum_line_of_run(run, axes_r)):
         if notch:
             lines.append(notch)

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["DEPHASED_KIND", "DEPHASABLE_KINDS", "EXTENSION_TIME_CONSTANTS", "group_delay_at_zero",
-           "dephase_samples"]
+           "dephase_samples", "advance_samples"]
 
 #: the kind product.nc's ``knowledge_filter`` reads once the knowledge is dephased
 DEPHASED_KIND = "butterworth_dephased"
@@ -92,6 +92,32 @@ def dephase_samples(values, dt: float, *, cutoff_hz: float, order: int,
         raise ValueError(f"kind: {kind!r} has no phase to take out (known: {sorted(DEPHASABLE_KINDS)})")
     if not (dt > 0 and cutoff_hz > 0):
         raise ValueError(f"dt and cutoff_hz must be > 0, got {dt}, {cutoff_hz}")
+    return _all_passed(values, dt, lambda f: -_phase(f, cutoff_hz, order, kind),
+                       group_delay_at_zero(cutoff_hz, order, kind), EXTENSION_TIME_CONSTANTS / cutoff_hz)
+
+
+def advance_samples(values, dt: float, advance_s: float, *, extension_s: float | None = None) -> np.ndarray:
+    """The samples advanced in time by ``advance_s`` [s] (``x(t + advance_s)``; a negative value delays them):
+    the all-pass ``e^{i 2π f advance_s}`` with the same ends as :func:`dephase_samples` (point reflection over
+    ``extension_s``, by default 2 s or 4 × the advance, whichever is longer). Used to take a latency the images
+    measured out of the knowledge (:mod:`restore.knowledge_timing`).
+
+    Examples
+    --------
+    >>> t = np.arange(0, 2, 1 / 64); x = np.sin(2 * np.pi * 1.5 * t)
+    >>> y = advance_samples(x, 1 / 64, 0.02)
+    >>> bool(np.max(np.abs(y - np.sin(2 * np.pi * 1.5 * (t + 0.02)))[:100]) < 1e-3)
+    True
+    """
+    if not dt > 0:
+        raise ValueError(f"dt must be > 0, got {dt}")
+    ext = max(2.0, 4.0 * abs(advance_s)) if extension_s is None else float(extension_s)
+    return _all_passed(values, dt, lambda f: 2 * np.pi * f * advance_s, advance_s, ext)
+
+
+def _all_passed(values, dt: float, rotation, line_advance_s: float, extension_s: float) -> np.ndarray:
+    """``values`` through ``e^{i rotation(f)}`` on their point-reflected extension (module docstring); the line
+    through the extension's ends is taken out first and put back advanced by ``line_advance_s``."""
     v = np.asarray(values, dtype=np.float64)
     n = v.size
     ok = np.isfinite(v)
@@ -99,7 +125,7 @@ def dephase_samples(values, dt: float, *, cutoff_hz: float, order: int,
         return v.copy()
     i = np.arange(n)
     x = np.where(ok, v, np.interp(i, i[ok], v[ok]))
-    m = int(min(n - 1, np.ceil(EXTENSION_TIME_CONSTANTS / (cutoff_hz * dt))))
+    m = int(min(n - 1, np.ceil(extension_s / dt)))
     head = 2 * x[0] - x[m:0:-1]
     tail = 2 * x[-1] - x[-2:-m - 2:-1]
     xe = np.concatenate([head, x, tail])
@@ -108,7 +134,6 @@ def dephase_samples(values, dt: float, *, cutoff_hz: float, order: int,
     slope = (xe[-1] - xe[0]) / (te[-1] - te[0])
     line = xe[0] + slope * (te - te[0])
     f = np.fft.rfftfreq(ne, dt)
-    rotated = np.fft.irfft(np.fft.rfft(xe - line) * np.exp(-1j * _phase(f, cutoff_hz, order, kind)), ne)
-    advance = group_delay_at_zero(cutoff_hz, order, kind)
-    out = (rotated + line + slope * advance)[m:m + n]
+    rotated = np.fft.irfft(np.fft.rfft(xe - line) * np.exp(1j * rotation(f)), ne)
+    out = (rotated + line + slope * line_advance_s)[m:m + n]
     return np.where(ok, out, np.nan)

@@ -216,8 +216,9 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
         if a in res.knowledge_dephasing:
             data[f"knowledge_dephasing_{a}"] = (
                 "time", res.knowledge_dephasing[a],
-                {"units": "rad", "long_name": f"part of correction_{a} that takes the causal AOCS filter's phase out "
-                                              "of the knowledge (restore.knowledge_dephasing)"})
+                {"units": "rad", "long_name": f"part of correction_{a} that takes the causal AOCS filter's phase and the "
+                                              "latency the images measured out of the knowledge "
+                                              "(restore.knowledge_dephasing, restore.knowledge_timing)"})
     names = [p.name for p in res.pairs]
     for k, a in enumerate(AXES):
         data[f"diff_{a}"] = (("pair", "time"), np.stack([p.synthesis.diff[:, k] for p in res.pairs]),
@@ -240,6 +241,7 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
              "anchored_on_star_tracker": int(res.anchored),
              "yaw_pitch_coupling": float(res.yaw_pitch_coupling),
              "yaw_roll_coupling": float(res.yaw_roll_coupling),
+             "knowledge_latency": json.dumps(res.knowledge_latency, sort_keys=True),
              "integration": json.dumps({a: {"pairs": rec.pairs, "method": rec.method, "options": rec.options,
                                             "highpass_hz": rec.highpass_hz, "line_period_s": rec.line_period_s,
                                             "unobservable_rms_rad": rec.unobservable_rms_rad,
@@ -394,6 +396,7 @@ def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult
                      if f"sigma_{a}" in ds.variables},
         yaw_pitch_coupling=float(ds.attrs.get("yaw_pitch_coupling", 0.0)),
         yaw_roll_coupling=float(ds.attrs.get("yaw_roll_coupling", 0.0)),
+        knowledge_latency=json.loads(ds.attrs.get("knowledge_latency", "{}")),
         knowledge_smoothing={a: _values(ds, f"knowledge_smoothing_{a}") for a in AXES
                              if f"knowledge_smoothing_{a}" in ds.variables},
         knowledge_dephasing={a: _values(ds, f"knowledge_dephasing_{a}") for a in AXES

@@ -108,6 +108,7 @@ class Restorer:
         """
         s = self.settings = self._settings_for(product)
         self._axis_highpass = {}
+        self.latency = None
         recorded, (product, dephasing) = product, stages.dephased_knowledge(product, s)
         recorded_knowledge = dict(zip(AXES, recorded.knowledge.at(recorded.time)))
         t_all = _time.perf_counter()
@@ -121,6 +122,8 @@ class Restorer:
             knowledge = dict(zip(AXES, product.knowledge.at(product.time)))
             pairs, records, estimate = self.synthesise_and_integrate(product, pairs, knowledge, timings, bar)
             pairs, records, estimate = self.rematch(product, pairs, knowledge, records, estimate, timings, bar)
+            product, knowledge, dephasing, (pairs, records, estimate) = self.time_knowledge(
+                product, knowledge, dephasing, pairs, records, estimate, timings, bar)
             bar.note("predicted σ (Monte Carlo through the integration)")
             t = _time.perf_counter()
             sigma = stages.predicted_sigma(records, product, s)
@@ -132,11 +135,7 @@ class Restorer:
             records, estimate, sigma = self.condition_on_knowledge(product, knowledge, records, estimate, sigma,
                                                                     timings, bar)
             s = self.settings
-            t = _time.perf_counter()
-            if s.sigma_local_error and sigma:
-                bar.note("predicted σ with the local matching error (two interleaved halves of the swath)")
-            sigma = stages.raise_by_local_error(sigma, records, pairs, product, s)
-            timings["local_error_sigma_s"] = _time.perf_counter() - t
+            sigma = self.raise_by_local_error(sigma, records, pairs, product, timings, bar)
             smoothings = stages.knowledge_smoothings(product, s, s.axes)
             smoothing = stages.knowledge_smoothing_correction(product, smoothings, records)
             sigma, checks = stages.raise_by_knowledge_check(
@@ -185,6 +184,7 @@ class Restorer:
                                  yaw_pitch_coupling=stages.yaw_pitch_coupling(pairs),
                                  yaw_roll_coupling=stages.yaw_coupling(pairs, "roll"),
                                  knowledge_smoothing=smoothing, knowledge_dephasing=dephasing, knowledge_checks=checks,
+                                 knowledge_latency=self.latency.to_dict() if self.latency is not None else {},
                                  knowledge_fusion=fusions)
 
     def _settings_for(self, product: Product) -> RestorationSettings:
@@ -317,6 +317,36 @@ class Restorer:
                                                   psd_ceiling=ceilings.get(a), no_blind_tone=a in toneless)
                 for a in (s.axes if only is None else only)}
         return recs, {a: r.increment for a, r in recs.items()}
+
+    def raise_by_local_error(self, sigma: dict, records: dict, pairs: list, product: Product, timings: dict,
+                             bar) -> dict:
+        """σ raised by the local matching error (:func:`stages.raise_by_local_error`), timed."""
+        t = _time.perf_counter()
+        if self.settings.sigma_local_error and sigma:
+            bar.note("predicted σ with the local matching error (two interleaved halves of the swath)")
+        sigma = stages.raise_by_local_error(sigma, records, pairs, product, self.settings)
+        timings["local_error_sigma_s"] = _time.perf_counter() - t
+        return sigma
+
+    def time_knowledge(self, product: Product, knowledge: dict, dephasing: dict, pairs: list, records: dict,
+                       estimate: dict, timings: dict, bar) -> tuple:
+        """With ``knowledge_timing``: the AOCS knowledge's latency as the images measure it
+        (:func:`stages.knowledge_latency`); where it is significant, the knowledge advanced by it
+        (:func:`stages.advanced_knowledge`, added to ``dephasing``: part of the correction) and every axis
+        integrated again. Returns ``(product, knowledge, dephasing, (pairs, records, estimate))``, new or as
+        given; the estimate is kept in ``self.latency``."""
+        t = _time.perf_counter()
+        self.latency = est = stages.knowledge_latency(records, knowledge, product, self.settings)
+        if est is None or not est.significant:
+            return product, knowledge, dephasing, (pairs, records, estimate)
+        bar.note(f"AOCS knowledge {est.delay_s * 1e3:.1f} ± {est.sigma_s * 1e3:.1f} ms late against the images: "
+                 "advanced by that, integrating again")
+        product, moved = stages.advanced_knowledge(product, est.delay_s)
+        knowledge = dict(zip(AXES, product.knowledge.at(product.time)))
+        dephasing = {a: dephasing.get(a, 0.0) + moved[a] for a in AXES}
+        out = self.synthesise_and_integrate(product, pairs, knowledge, {}, bar.notes_only())
+        timings["knowledge_timing_s"] = _time.perf_counter() - t
+        return product, knowledge, dephasing, out
 
     def weigh_noise_colour(self, product: Product, knowledge: dict, records: dict, estimate: dict, sigma: dict,
                            timings: dict, bar) -> tuple:

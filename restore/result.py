@@ -152,6 +152,9 @@ class RestorationResult:
     #: ``{axis: (line,)}``: the part of ``correction`` that takes a causal AOCS filter's phase out of the knowledge
     #: [rad] (:mod:`restore.knowledge_dephasing`); empty when it was off or the filter has no phase
     knowledge_dephasing: dict = field(default_factory=dict)
+    #: the AOCS knowledge's latency as the images measured it (:meth:`restore.knowledge_timing.LatencyEstimate.to_dict`;
+    #: taken out of the knowledge, in ``knowledge_dephasing``, where ``significant``); empty when not measured
+    knowledge_latency: dict = field(default_factory=dict)
     #: per axis checked: the restored angle against the smoothed knowledge
     #: (:class:`restore.knowledge_check.KnowledgeCheck`); its ``excess_rad2`` is in ``sigma``
     knowledge_checks: dict = field(default_factory=dict)

@@ -59,6 +59,7 @@ class RestorationSettings:
     knowledge_noise_floor: bool = False
     knowledge_smoothing: bool = True
     knowledge_dephasing: bool = True
+    knowledge_timing: bool = True
     deconvolve_exposure: bool = True
     highpass_per_axis: bool = False
     sigma_local_error: bool = True
@@ -167,6 +168,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.knowledge_noise_floor = sec.boolean("knowledge_noise_floor", s.knowledge_noise_floor)
     s.knowledge_smoothing = sec.boolean("knowledge_smoothing", s.knowledge_smoothing)
     s.knowledge_dephasing = sec.boolean("knowledge_dephasing", s.knowledge_dephasing)
+    s.knowledge_timing = sec.boolean("knowledge_timing", s.knowledge_timing)
     s.deconvolve_exposure = sec.boolean("deconvolve_exposure", s.deconvolve_exposure)
     s.highpass_per_axis = sec.boolean("highpass_per_axis", s.highpass_per_axis)
     rm = sec.raw("rematch", "auto")

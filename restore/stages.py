@@ -52,7 +52,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_error_prior", "knowledge_filter_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_error_prior", "knowledge_filter_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_latency", "advanced_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -881,6 +881,48 @@ def dephased_knowledge(product: Product, settings: RestorationSettings) -> tuple
     out = replace(product, ds=ds, knowledge=series)
     t = product.time
     before, after = product.knowledge.at(t), series.at(t)
+    return out, {a: np.asarray(after[i] - before[i], dtype=np.float64) for i, a in enumerate(AXES)}
+
+
+def knowledge_latency(records: dict, knowledge: dict, product: Product, settings: RestorationSettings):
+    """The AOCS knowledge's latency as the images measure it (:func:`restore.knowledge_timing.knowledge_latency`,
+    in the band from the records' high-pass to where the knowledge's filter, through its spline, passes less
+    than 90 %), or None: ``knowledge_timing`` off, no restored axis, a product that does not record its filter,
+    or no such band."""
+    from .knowledge_prior import spline_response
+    from .knowledge_timing import knowledge_latency as latency_of
+    from .knowledge_timing import latency_band
+
+    attrs = product.ds.attrs
+    recs = {a: r for a, r in records.items() if a != "yaw"}
+    if not settings.knowledge_timing or not recs or "knowledge_cutoff_hz" not in attrs \
+            or "knowledge_filter_order" not in attrs:
+        return None
+    cutoff, order = float(attrs["knowledge_cutoff_hz"]), int(attrs["knowledge_filter_order"])
+    kind = str(attrs.get("knowledge_filter", "butterworth_zero_phase"))
+    rate = product.knowledge_noise[1] if product.knowledge_noise is not None else None
+
+    def gain(f):
+        g = np.abs(knowledge_response(f, cutoff, order, kind))
+        return g * np.abs(spline_response(f, rate)) if rate else g
+    dt = float(next(iter(recs.values())).line_period_s)
+    band = latency_band(max(float(r.highpass_hz) for r in recs.values()), gain, top_hz=0.5 / dt)
+    return latency_of(recs, knowledge, band) if band is not None else None
+
+
+def advanced_knowledge(product: Product, delay_s: float) -> tuple[Product, dict]:
+    """The product with its knowledge samples advanced by ``delay_s`` (the knowledge at t then describes t:
+    :func:`restore.knowledge_dephasing.advance_samples`), and ``{axis: (line,)}``, the advanced knowledge less
+    the given one at the lines [rad]."""
+    from .knowledge_dephasing import advance_samples
+
+    kn = product.knowledge
+    tk = np.asarray(kn.time, dtype=np.float64)
+    dt = float(np.median(np.diff(tk)))
+    series = AttitudeSeries(tk, *(advance_samples(getattr(kn, a), dt, delay_s) for a in AXES))
+    out = replace(product, knowledge=series)
+    t = product.time
+    before, after = kn.at(t), series.at(t)
     return out, {a: np.asarray(after[i] - before[i], dtype=np.float64) for i, a in enumerate(AXES)}
 
 

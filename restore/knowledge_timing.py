@@ -1,0 +1,198 @@
+"""The AOCS knowledge's latency, measured by the images: a time-tag offset between the knowledge and the lines.
+
+A real AOCS knowledge may describe the attitude a little before its time tag
+says (``k(t) = θ(t − δ)`` through its filter: on-board time-tagging, a
+telemetry pipeline's delay). Nothing in product.nc says so, and the
+restoration takes the knowledge for the attitude wherever the knowledge is
+good: below its high-pass, in the prior's ceiling, in the conditioning and the
+fusion. A latency of 15 ms under a 2.2 Hz line of 1 px is 0.2 px of knowledge
+error in a band the ceiling calls known to 1 %: the prior then shrinks the
+images' estimate there toward the knowledge.
+
+The images see the same attitude at their own times, and where both see it
+(above the high-pass, below the frequency where the knowledge's filter passes
+less than :data:`MIN_GAIN`) the attitude the knowledge misses is, to first
+order, ``θ − k ≈ δ k'``. Each pair's differentials of ``θ − k`` — the
+remaining differentials the integration was given plus those of the estimate
+it started from, ``y = D + Δ_τ(previous)``, less what the integration's own estimate of it explains outside the band
+(the differentials of a 9 Hz line, bridged over a gap, would put power in it) — are regressed on the same
+differentials of the knowledge's derivative in that band,
+``x = Δ_τ(BP(k'))``, ``y`` band-limited the same way (the pairs' differentials of what the knowledge misses
+above its band are far larger and would leak in over a short record): weighted least squares, the
+weights ``1/σ²`` under a Tukey taper (:data:`TAPER`), ``δ = Σ w x y / Σ w x²``, a
+Gauss–Newton step repeated with the knowledge advanced by the estimate so far
+(:data:`ITERATIONS`). Its uncertainty is a delete-one-block jackknife over
+:data:`BLOCKS` stretches of the record (the errors of neighbouring lines are
+not independent). Where the attitude has no power in the band, ``x`` is small
+and δ is not measured — but then a latency costs nothing either.
+
+It is taken out (:func:`restore.knowledge_dephasing.advance_samples`) only
+when it is at least :data:`MIN_SIGNIFICANCE` of its own σ.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+__all__ = ["LatencyEstimate", "latency_band", "knowledge_latency", "MIN_GAIN", "BLOCKS", "ITERATIONS",
+           "MIN_SIGNIFICANCE"]
+
+#: the band ends where the knowledge's filter passes less than this of the attitude
+MIN_GAIN = 0.9
+#: stretches of the record the jackknife leaves out one at a time
+BLOCKS = 8
+#: Gauss–Newton steps (each with the knowledge advanced by the estimate so far)
+ITERATIONS = 3
+#: the regression's weights fall to zero over this fraction of the record at its ends (a Tukey window: the
+#: band-limited series leak least there)
+TAPER = 0.2
+#: the latency is taken out when it is at least this many of its σ
+MIN_SIGNIFICANCE = 4.0
+
+
+@dataclass(frozen=True)
+class LatencyEstimate:
+    """The knowledge's latency as the images measure it: ``delay_s`` (the knowledge at t describes t −
+    delay_s), ``sigma_s`` (jackknife), the band [Hz] and the axes it was measured on."""
+
+    delay_s: float
+    sigma_s: float
+    band_hz: tuple
+    axes: tuple
+
+    @property
+    def significant(self) -> bool:
+        """At least :data:`MIN_SIGNIFICANCE` σ from zero."""
+        return bool(np.isfinite(self.delay_s) and self.sigma_s > 0
+                    and abs(self.delay_s) >= MIN_SIGNIFICANCE * self.sigma_s)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["band_hz"] = list(self.band_hz)
+        d["axes"] = list(self.axes)
+        d["significant"] = self.significant
+        return d
+
+
+def latency_band(highpass_hz: float, gain, *, top_hz: float) -> tuple[float, float] | None:
+    """``(lo, hi)`` [Hz]: from the high-pass to where ``gain(f)`` (the knowledge filter's modulus) falls below
+    :data:`MIN_GAIN`; None when that leaves less than an octave's fifth (``hi < 1.15 lo``)."""
+    f = np.linspace(0.0, float(top_hz), 4001)
+    below = np.nonzero(np.abs(np.asarray(gain(f))) < MIN_GAIN)[0]
+    hi = float(top_hz)
+    if below.size:
+        fine = np.linspace(f[max(below[0] - 1, 0)], f[below[0]], 1001)
+        hi = float(fine[np.nonzero(np.abs(np.asarray(gain(fine))) < MIN_GAIN)[0][0]])
+    lo = float(highpass_hz)
+    return (lo, hi) if lo > 0 and hi >= 1.15 * lo else None
+
+
+def _band_derivative(k: np.ndarray, dt: float, band) -> np.ndarray:
+    """``d/dt`` of ``k`` band-limited to ``band`` (FFT of the record extended by its mirror image)."""
+    n = k.size
+    xe = np.concatenate([k, k[::-1]])
+    f = np.fft.rfftfreq(2 * n, dt)
+    keep = (f >= band[0]) & (f <= band[1])
+    return np.fft.irfft(np.fft.rfft(xe) * keep * (2j * np.pi * f), 2 * n)[:n]
+
+
+def _band_passed(y: np.ndarray, dt: float, band) -> np.ndarray:
+    """``y`` band-limited to ``band`` (gaps bridged linearly for the FFT, NaN again after; the record extended
+    by its mirror image)."""
+    n = y.size
+    ok = np.isfinite(y)
+    if np.count_nonzero(ok) < 2:
+        return np.full(n, np.nan)
+    i = np.arange(n)
+    ye = np.where(ok, y, np.interp(i, i[ok], y[ok]))
+    ye = np.concatenate([ye, ye[::-1]])
+    f = np.fft.rfftfreq(2 * n, dt)
+    keep = (f >= band[0]) & (f <= band[1])
+    return np.where(ok, np.fft.irfft(np.fft.rfft(ye) * keep, 2 * n)[:n], np.nan)
+
+
+def _differential(series: np.ndarray, tau: float, dt: float, lag) -> np.ndarray:
+    from .method_choice import predicted_differential
+
+    return predicted_differential(series, tau, dt, lag)
+
+
+def _sums(ys, xs, ws, edges):
+    """Per block: Σ w x y and Σ w x² (over pairs and axes)."""
+    sxy = np.zeros(len(edges) - 1)
+    sxx = np.zeros(len(edges) - 1)
+    for y, x, w in zip(ys, xs, ws):
+        ok = np.isfinite(y) & np.isfinite(x) & (w > 0)
+        wy, wx = np.where(ok, w * x * y, 0.0), np.where(ok, w * x * x, 0.0)
+        for b in range(len(edges) - 1):
+            sxy[b] += wy[edges[b]:edges[b + 1]].sum()
+            sxx[b] += wx[edges[b]:edges[b + 1]].sum()
+    return sxy, sxx
+
+
+def knowledge_latency(records: dict, knowledge: dict, band) -> LatencyEstimate | None:
+    """The knowledge's latency from the differentials of ``records`` (module docstring).
+
+    Parameters
+    ----------
+    records : dict
+        ``{axis: IntegrationRecord}`` of the restored axes (their remaining differentials, σ, delays, lags,
+        line period and the estimate they started from).
+    knowledge : dict
+        ``{axis: (line,)}``: the knowledge the records' differentials remain from [rad].
+    band : (float, float)
+        Where both the images and the knowledge see the attitude [Hz] (:func:`latency_band`).
+
+    Returns
+    -------
+    LatencyEstimate or None
+        None without a record, a band, or any weight in it.
+    """
+    from .knowledge_dephasing import advance_samples
+
+    axes = tuple(a for a in sorted(records) if a in knowledge)
+    if not axes or band is None:
+        return None
+    dt = float(records[axes[0]].line_period_s)
+    n = np.asarray(knowledge[axes[0]]).size
+    from scipy.signal.windows import tukey
+
+    taper = tukey(n, TAPER)
+    ys0, lay = [], []
+    for a in axes:
+        rec = records[a]
+        prev = np.nan_to_num(np.asarray(rec.previous, dtype=np.float64)) if rec.previous is not None else np.zeros(n)
+        inc = np.nan_to_num(np.asarray(rec.increment, dtype=np.float64)) if rec.increment is not None \
+            else np.zeros(n)
+        # what the integration explained out of the band is taken out of the differentials before they are
+        # band-limited: bridging a gap of a 9 Hz line's differentials puts power in the band
+        explained = _band_passed(prev + inc, dt, band)
+        for j in range(len(rec.taus)):
+            lag = rec.lags_s[j] if rec.lags_s is not None else None
+            s = np.asarray(rec.sigmas[j], dtype=np.float64)
+            w = np.where(np.isfinite(s) & (s > 0), 1.0 / np.where(s > 0, s, 1.0) ** 2, 0.0) * taper
+            ys0.append(np.asarray(rec.diffs[j], dtype=np.float64) - _differential(inc, rec.taus[j], dt, lag)
+                       + _differential(explained, rec.taus[j], dt, lag))
+            lay.append((a, float(rec.taus[j]), lag, w))
+    edges = np.linspace(0, n, BLOCKS + 1).astype(int)
+    delay, sxy, sxx = 0.0, None, None
+    for _ in range(ITERATIONS):
+        shifted = {a: advance_samples(np.asarray(knowledge[a], dtype=np.float64), dt, delay) if delay else
+                   np.asarray(knowledge[a], dtype=np.float64) for a in axes}
+        ys, xs, ws = [], [], []
+        for y0, (a, tau, lag, w) in zip(ys0, lay):
+            moved = shifted[a] - np.asarray(knowledge[a], dtype=np.float64)
+            ys.append(_band_passed(y0 - _differential(moved, tau, dt, lag) if delay else y0, dt, band))
+            xs.append(_differential(_band_derivative(shifted[a], dt, band), tau, dt, lag))
+            ws.append(w)
+        sxy, sxx = _sums(ys, xs, ws, edges)
+        if not sxx.sum() > 0:
+            return None
+        delay += float(sxy.sum() / sxx.sum())
+    left_out = np.array([(sxy.sum() - sxy[b]) / (sxx.sum() - sxx[b]) if sxx.sum() - sxx[b] > 0 else np.nan
+                         for b in range(BLOCKS)])
+    left_out = left_out[np.isfinite(left_out)]
+    k = left_out.size
+    sigma = float(np.sqrt((k - 1) / k * np.sum((left_out - left_out.mean()) ** 2))) if k > 2 else float("inf")
+    return LatencyEstimate(delay_s=delay, sigma_s=sigma, band_hz=(float(band[0]), float(band[1])), axes=axes)

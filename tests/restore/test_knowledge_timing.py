@@ -1,0 +1,103 @@
+"""The AOCS knowledge's latency measured from the pairs' differentials (restore.knowledge_timing), on known
+delays."""
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from restore.knowledge_prior import knowledge_response
+from restore.knowledge_timing import LatencyEstimate, MIN_GAIN, knowledge_latency, latency_band
+from restore.method_choice import predicted_differential
+
+DT = 4e-4
+N = 4000
+TAUS = (0.0074, 0.0148, 0.0222)
+
+
+def _attitude(t, amp=4e-6):
+    """Lines in the band (1.3, 2.2 Hz) and one far above it (9 Hz, which the knowledge does not see)."""
+    return amp * (np.sin(2 * np.pi * 2.2 * t + 0.3) + 0.5 * np.sin(2 * np.pi * 1.3 * t + 1.0)), \
+        amp * 2.0 * np.sin(2 * np.pi * 9.0 * t + 0.7)
+
+
+def _records(delay_s, *, noise_rad=4e-8, seed=1, pitch_only=False):
+    """Records whose remaining differentials are those of θ − k, k the in-band attitude ``delay_s`` late."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(N) * DT
+    band, high = _attitude(t)
+    late, _ = _attitude(t - delay_s)
+    theta, k = band + high, late
+    recs = {}
+    for a in (("pitch",) if pitch_only else ("roll", "pitch")):
+        diffs = np.array([predicted_differential(theta - k, tau, DT) + noise_rad * rng.standard_normal(N)
+                          for tau in TAUS])
+        diffs[1, 1000:1100] = np.nan   # a gap
+        # the integration's estimate of θ − k: out of the band whole, in it shrunk to half towards the knowledge
+        increment = high + 0.5 * (band - late)
+        recs[a] = SimpleNamespace(taus=np.array(TAUS), diffs=diffs, sigmas=np.full((3, N), noise_rad),
+                                  lags_s=np.zeros((3, N)), line_period_s=DT, previous=np.zeros(N),
+                                  increment=increment)
+    return recs, {a: k for a in recs}
+
+
+@pytest.mark.parametrize("delay_ms", [5.0, 15.0, 30.0, -10.0])
+def test_a_known_latency_is_measured_within_its_sigma(delay_ms):
+    """Over a gap, under a 9 Hz line twice the band's that the knowledge does not see, with the integration's
+    estimate shrunk to half in the band: the latency within 1 ms, its σ at most 3 ms, significant from 10 ms."""
+    recs, kn = _records(delay_ms * 1e-3)
+    est = knowledge_latency(recs, kn, (0.8, 3.3))
+    assert isinstance(est, LatencyEstimate) and est.axes == ("pitch", "roll")
+    assert est.delay_s == pytest.approx(delay_ms * 1e-3, abs=1e-3)
+    assert abs(est.delay_s - delay_ms * 1e-3) < 2 * est.sigma_s < 6e-3
+    assert est.significant == (abs(delay_ms) >= 10)
+
+
+def test_no_latency_is_not_significant():
+    for seed in (1, 2, 3):
+        est = knowledge_latency(*_records(0.0, seed=seed), (0.8, 3.3))
+        assert abs(est.delay_s) < 1e-3 and abs(est.delay_s) < est.sigma_s and not est.significant, est
+
+
+def test_the_estimate_so_far_is_part_of_what_the_knowledge_misses():
+    """The records' differentials remain from the knowledge *and* the estimate they started from: with half
+    of θ − k already in ``previous``, the same latency is measured."""
+    recs, kn = _records(0.015)
+    alone = knowledge_latency(recs, kn, (0.8, 3.3))
+    t = np.arange(N) * DT
+    band, high = _attitude(t)
+    late, _ = _attitude(t - 0.015)
+    half = 0.5 * (band + high - late)
+    for rec in recs.values():
+        rec.previous = half
+        rec.increment = rec.increment - half
+        rec.diffs = rec.diffs - np.array([predicted_differential(half, tau, DT) for tau in TAUS])
+    est = knowledge_latency(recs, kn, (0.8, 3.3))
+    assert est.delay_s == pytest.approx(alone.delay_s, abs=1e-5)
+
+
+def test_the_band_ends_where_the_knowledge_stops_seeing_the_attitude():
+    def gain(f):
+        return np.abs(knowledge_response(f, 4.0, 4, "butterworth_dephased"))
+    lo, hi = latency_band(0.8, gain, top_hz=1250.0)
+    assert lo == 0.8 and gain(np.array([hi]))[0] == pytest.approx(MIN_GAIN, abs=0.01)
+    assert hi == pytest.approx(4.0 * (1 / MIN_GAIN ** 2 - 1) ** (1 / 8), rel=0.01)
+    assert latency_band(3.0, gain, top_hz=1250.0) is None   # the high-pass above the knowledge's band
+    assert knowledge_latency({}, {}, (0.8, 3.3)) is None
+    recs, kn = _records(0.01)
+    assert knowledge_latency(recs, kn, None) is None
+
+
+def test_the_summary_says_a_latency_taken_out_and_nothing_otherwise():
+    import json
+
+    import xarray as xr
+
+    from reports.summary import knowledge_timing_line
+
+    est = LatencyEstimate(delay_s=0.0151, sigma_s=0.0021, band_hz=(0.8, 3.44), axes=("pitch", "roll"))
+    ds = xr.Dataset(attrs={"knowledge_latency": json.dumps(est.to_dict())})
+    line = knowledge_timing_line(ds)
+    assert line is not None and "15.1 ± 2.1 ms late" in line and "pitch, roll at 0.80–3.44 Hz" in line
+    weak = LatencyEstimate(delay_s=0.004, sigma_s=0.0021, band_hz=(0.8, 3.44), axes=("pitch", "roll"))
+    assert knowledge_timing_line(ds.assign_attrs(knowledge_latency=json.dumps(weak.to_dict()))) is None
+    assert knowledge_timing_line(xr.Dataset()) is None and knowledge_timing_line(None) is None
