@@ -27,7 +27,8 @@ not independent). Where the attitude has no power in the band, ``x`` is small
 and δ is not measured — but then a latency costs nothing either.
 
 It is taken out (:func:`restore.knowledge_dephasing.advance_samples`) only
-when it is at least :data:`MIN_SIGNIFICANCE` of its own σ.
+when it is at least :data:`MIN_SIGNIFICANCE` of its own σ and the knowledge's derivative in the band is the
+attitude's, not its white noise's (:data:`MIN_SIGNAL_TO_NOISE`).
 """
 from __future__ import annotations
 
@@ -36,7 +37,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 __all__ = ["LatencyEstimate", "latency_band", "knowledge_latency", "MIN_GAIN", "BLOCKS", "ITERATIONS",
-           "MIN_SIGNIFICANCE"]
+           "MIN_SIGNIFICANCE", "MIN_SIGNAL_TO_NOISE"]
 
 #: the band ends where the knowledge's filter passes less than this of the attitude
 MIN_GAIN = 0.9
@@ -44,6 +45,10 @@ MIN_GAIN = 0.9
 BLOCKS = 8
 #: Gauss–Newton steps (each with the knowledge advanced by the estimate so far)
 ITERATIONS = 3
+#: the knowledge's derivative in the band must hold at least this many times the power its white noise puts
+#: there: where it is the noise's (phr_cmg: 1.3–1.6 ×, its attitude nothing between 2 and 7.6 Hz), the regression
+#: measures how the noise correlates with itself through the pairs, not a latency (−5.1 ± 1.0 ms there)
+MIN_SIGNAL_TO_NOISE = 4.0
 #: the regression's weights fall to zero over this fraction of the record at its ends (a Tukey window: the
 #: band-limited series leak least there)
 TAPER = 0.2
@@ -60,12 +65,17 @@ class LatencyEstimate:
     sigma_s: float
     band_hz: tuple
     axes: tuple
+    #: the power of the knowledge's derivative in the band over what its own white noise puts there (inf when
+    #: the noise is not given)
+    signal_to_noise: float = float("inf")
 
     @property
     def significant(self) -> bool:
-        """At least :data:`MIN_SIGNIFICANCE` σ from zero."""
+        """At least :data:`MIN_SIGNIFICANCE` σ from zero, measured on an attitude, not on the knowledge's noise
+        (:data:`MIN_SIGNAL_TO_NOISE`)."""
         return bool(np.isfinite(self.delay_s) and self.sigma_s > 0
-                    and abs(self.delay_s) >= MIN_SIGNIFICANCE * self.sigma_s)
+                    and abs(self.delay_s) >= MIN_SIGNIFICANCE * self.sigma_s
+                    and self.signal_to_noise >= MIN_SIGNAL_TO_NOISE)
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -131,7 +141,7 @@ def _sums(ys, xs, ws, edges):
     return sxy, sxx
 
 
-def knowledge_latency(records: dict, knowledge: dict, band) -> LatencyEstimate | None:
+def knowledge_latency(records: dict, knowledge: dict, band, *, noise_psd=None) -> LatencyEstimate | None:
     """The knowledge's latency from the differentials of ``records`` (module docstring).
 
     Parameters
@@ -143,6 +153,9 @@ def knowledge_latency(records: dict, knowledge: dict, band) -> LatencyEstimate |
         ``{axis: (line,)}``: the knowledge the records' differentials remain from [rad].
     band : (float, float)
         Where both the images and the knowledge see the attitude [Hz] (:func:`latency_band`).
+    noise_psd : callable, optional
+        ``f [Hz] -> two-sided PSD [rad²/Hz]`` of the knowledge's white noise at the lines
+        (:func:`restore.knowledge_prior.knowledge_noise_floor`): sets ``signal_to_noise``.
 
     Returns
     -------
@@ -195,4 +208,12 @@ def knowledge_latency(records: dict, knowledge: dict, band) -> LatencyEstimate |
     left_out = left_out[np.isfinite(left_out)]
     k = left_out.size
     sigma = float(np.sqrt((k - 1) / k * np.sum((left_out - left_out.mean()) ** 2))) if k > 2 else float("inf")
-    return LatencyEstimate(delay_s=delay, sigma_s=sigma, band_hz=(float(band[0]), float(band[1])), axes=axes)
+    snr = float("inf")
+    if noise_psd is not None:
+        f = np.linspace(float(band[0]), float(band[1]), 2001)
+        noise = 2.0 * np.trapezoid(np.asarray(noise_psd(f)) * (2 * np.pi * f) ** 2, f)
+        power = np.mean([np.mean(_band_derivative(np.asarray(knowledge[a], dtype=np.float64), dt, band) ** 2)
+                         for a in axes])
+        snr = float(power / noise) if noise > 0 else float("inf")
+    return LatencyEstimate(delay_s=delay, sigma_s=sigma, band_hz=(float(band[0]), float(band[1])), axes=axes,
+                           signal_to_noise=snr)

@@ -907,7 +907,16 @@ def knowledge_latency(records: dict, knowledge: dict, product: Product, settings
         return g * np.abs(spline_response(f, rate)) if rate else g
     dt = float(next(iter(recs.values())).line_period_s)
     band = latency_band(max(float(r.highpass_hz) for r in recs.values()), gain, top_hz=0.5 / dt)
-    return latency_of(recs, knowledge, band) if band is not None else None
+    if band is None:
+        return None
+    noise = None
+    if product.knowledge_noise is not None:
+        from .knowledge_prior import knowledge_noise_floor
+        noise_rad, rate_hz = product.knowledge_noise
+
+        def noise(f):
+            return knowledge_noise_floor(f, rate_hz=rate_hz, noise_rad=noise_rad)
+    return latency_of(recs, knowledge, band, noise_psd=noise)
 
 
 def advanced_knowledge(product: Product, delay_s: float) -> tuple[Product, dict]:

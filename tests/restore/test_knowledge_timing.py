@@ -101,3 +101,30 @@ def test_the_summary_says_a_latency_taken_out_and_nothing_otherwise():
     weak = LatencyEstimate(delay_s=0.004, sigma_s=0.0021, band_hz=(0.8, 3.44), axes=("pitch", "roll"))
     assert knowledge_timing_line(ds.assign_attrs(knowledge_latency=json.dumps(weak.to_dict()))) is None
     assert knowledge_timing_line(xr.Dataset()) is None and knowledge_timing_line(None) is None
+
+
+def test_a_knowledge_whose_band_holds_only_its_noise_measures_no_latency():
+    """No attitude in the band (phr_cmg's case): the knowledge's derivative there is its white noise's, so
+    whatever the regression says is not a latency."""
+    from scipy.interpolate import CubicSpline
+
+    from restore.knowledge_prior import knowledge_noise_floor
+
+    rng = np.random.default_rng(5)
+    rate, noise = 64.0, 0.3e-6
+    tk = np.arange(0, N * DT + 0.1, 1 / rate)
+    t = np.arange(N) * DT
+    k = CubicSpline(tk, noise * rng.standard_normal(tk.size))(t)
+    diffs = np.array([predicted_differential(-k, tau, DT) + 4e-8 * rng.standard_normal(N) for tau in TAUS])
+    recs = {"pitch": SimpleNamespace(taus=np.array(TAUS), diffs=diffs, sigmas=np.full((3, N), 4e-8),
+                                     lags_s=np.zeros((3, N)), line_period_s=DT, previous=np.zeros(N),
+                                     increment=np.zeros(N))}
+
+    def psd(f):
+        return knowledge_noise_floor(f, rate_hz=rate, noise_rad=noise)
+    est = knowledge_latency(recs, {"pitch": k}, (2.0, 7.6), noise_psd=psd)
+    assert est.signal_to_noise < 2.0 and not est.significant
+    # the same regression with an attitude in the band: thousands of times the noise
+    recs2, kn2 = _records(0.015, pitch_only=True)
+    est2 = knowledge_latency(recs2, kn2, (0.8, 3.3), noise_psd=psd)
+    assert est2.signal_to_noise > 100 and est2.significant
