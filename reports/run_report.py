@@ -474,6 +474,53 @@ def _knowledge_check_text(chk: dict, ifov: float, sigma_rad: float | None = None
     return txt + (f"; σ takes {booked / ifov:.4f} px of the excess" if booked > 0 else "")
 
 
+def _explained_lines(run, unc) -> tuple:
+    """``(line or None, why)`` for each part of the error the restoration names and does not restore (the
+    knowledge's dephasing and latency, its filter's own error, the scene's band offset, a notch's continuum and
+    level)."""
+    from .summary import (knowledge_dephasing_line, knowledge_filter_line_of_run, knowledge_timing_line,
+                          notch_continuum_line_of_run, notch_level_line, scene_offset_line_of_run)
+
+    product_ds = getattr(getattr(run, "product", None), "ds", None)
+    explained = (
+        (knowledge_dephasing_line(product_ds.attrs if product_ds is not None else {}, run.restoration),
+         ". The high-pass, the low band, the prior's ceiling, the conditioning and the fusion all read the knowledge "
+         "as a zero-phase one; the phase of its recorded filter is known, so it was taken out by an all-pass on the "
+         "samples (no noise amplified; the lag stays over the record's last group delay, where the knowledge of the "
+         "next instants does not exist) and the knowledge read as a zero-phase filter of gain |F| "
+         "(restore.knowledge_dephasing)."),
+        (knowledge_timing_line(run.restoration),
+         ". Where both the images and the knowledge see the attitude (above the high-pass, where the knowledge's "
+         "filter passes 90 % or more), the attitude the knowledge misses is, to first order, its latency times "
+         "its rate: each pair's differentials of it were regressed on those of the knowledge's derivative, the "
+         "σ a jackknife over eight stretches of the record, and the knowledge advanced where the latency was "
+         "four σ or more (restore.knowledge_timing)."),
+        (knowledge_filter_line_of_run(run, list(unc)),
+         ". Below the high-pass the images' estimate is discarded (the differentials see little there and a band's "
+         "slow bias would pass for attitude) and the restored angle is the knowledge: its noise is smoothed and "
+         "in σ, and so is its filter's own error, estimated from the knowledge through (1 − F)/F "
+         "(restore.observability.knowledge_filter_error_below) — nothing for a zero-phase filter well below its "
+         "cut-off, the lag of a causal one. Nothing restores it."),
+        (scene_offset_line_of_run(run, list(unc)),
+         ": each band is a different blend of the scene's sunlit and shaded features, offset towards the sun by "
+         "amounts that follow the scene's large features, and where the pairs see the attitude through about "
+         "2π f τ such an offset is an attitude to every pair (restore.observability.scene_offset_band). Its size "
+         "depends on the scene, not on the product; an AOCS knowledge whose band reaches the top of this one "
+         "would hold it."),
+        (notch_continuum_line_of_run(run, list(unc)),
+         ". The spectrum estimate does not estimate the prior round a frequency every pair is blind to; it "
+         "bridges it from the notch's edge bins, the smaller one, so that a line's skirt does not raise it. "
+         "Under a broadband continuum that bridge can fall to nothing while the pairs' flanks still see the "
+         "jitter: the figure is the error the filter built on the bridge adds to the best the pairs allow were "
+         "the continuum at its sides' level (restore.observability.notch_continuum)."),
+        (notch_level_line(run.restoration, list(unc)),
+         ". Over its whole width a notch's flanks still see the attitude: its level, fitted there on what the MAP "
+         "left (restore.integration.spectrum.notch_levels), was detected above the bridge, and the prior took it "
+         "(restore.axis_integration._notch_prior). The filter gives back what the flanks see; the notch's middle, "
+         "which no pair sees, is in the unobservable part and in σ."))
+    return explained
+
+
 def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
     unc = D.uncertainty(run)
     if not unc:
@@ -518,39 +565,7 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
                 "power the knowledge's error has there (a drift at a record end or a gap edge, from band offsets "
                 "that move like an attitude); σ holds the combination's error on those lines "
                 "(restoration.knowledge_fusion).")
-    from .summary import (knowledge_filter_line_of_run, knowledge_timing_line, notch_continuum_line_of_run,
-                          notch_level_line, scene_offset_line_of_run)
-
-    explained = (
-        (knowledge_timing_line(run.restoration),
-         ". Where both the images and the knowledge see the attitude (above the high-pass, where the knowledge's "
-         "filter passes 90 % or more), the attitude the knowledge misses is, to first order, its latency times "
-         "its rate: each pair's differentials of it were regressed on those of the knowledge's derivative, the "
-         "σ a jackknife over eight stretches of the record, and the knowledge advanced where the latency was "
-         "four σ or more (restore.knowledge_timing)."),
-        (knowledge_filter_line_of_run(run, list(unc)),
-         ". Below the high-pass the images' estimate is discarded (the differentials see little there and a band's "
-         "slow bias would pass for attitude) and the restored angle is the knowledge: its noise is smoothed and "
-         "in σ, and so is its filter's own error, estimated from the knowledge through (1 − F)/F "
-         "(restore.observability.knowledge_filter_error_below) — nothing for a zero-phase filter well below its "
-         "cut-off, the lag of a causal one. Nothing restores it."),
-        (scene_offset_line_of_run(run, list(unc)),
-         ": each band is a different blend of the scene's sunlit and shaded features, offset towards the sun by "
-         "amounts that follow the scene's large features, and where the pairs see the attitude through about "
-         "2π f τ such an offset is an attitude to every pair (restore.observability.scene_offset_band). Its size "
-         "depends on the scene, not on the product; an AOCS knowledge whose band reaches the top of this one "
-         "would hold it."),
-        (notch_continuum_line_of_run(run, list(unc)),
-         ". The spectrum estimate does not estimate the prior round a frequency every pair is blind to; it "
-         "bridges it from the notch's edge bins, the smaller one, so that a line's skirt does not raise it. "
-         "Under a broadband continuum that bridge can fall to nothing while the pairs' flanks still see the "
-         "jitter: the figure is the error the filter built on the bridge adds to the best the pairs allow were "
-         "the continuum at its sides' level (restore.observability.notch_continuum)."),
-        (notch_level_line(run.restoration, list(unc)),
-         ". Over its whole width a notch's flanks still see the attitude: its level, fitted there on what the MAP "
-         "left (restore.integration.spectrum.notch_levels), was detected above the bridge, and the prior took it "
-         "(restore.axis_integration._notch_prior). The filter gives back what the flanks see; the notch's middle, "
-         "which no pair sees, is in the unobservable part and in σ."))
+    explained = _explained_lines(run, unc)
     for line, why in explained:
         if line:
             text = line.strip()

@@ -331,6 +331,24 @@ def knowledge_filter_line(product_attrs, restoration, axes) -> str | None:
             + " there, not restored (σ holds it)")
 
 
+def knowledge_dephasing_line(product_attrs, restoration) -> str | None:
+    """The line saying that a causal AOCS knowledge had its filter's phase taken out before it was used
+    (:mod:`restore.knowledge_dephasing`): the filter and its lag; None when nothing was dephased."""
+    at = dict(product_attrs or {})
+    if restoration is None or not any(f"knowledge_dephasing_{a}" in restoration for a in ("roll", "pitch", "yaw")) \
+            or "knowledge_cutoff_hz" not in at or "knowledge_filter_order" not in at:
+        return None
+    from restore.knowledge_dephasing import DEPHASABLE_KINDS, group_delay_at_zero
+
+    kind = str(at.get("knowledge_filter", "butterworth_zero_phase"))
+    if kind not in DEPHASABLE_KINDS:
+        return None
+    cutoff, order = float(at["knowledge_cutoff_hz"]), int(at["knowledge_filter_order"])
+    lag = group_delay_at_zero(cutoff, order, kind)
+    return (f"  the AOCS knowledge's causal filter (order {order}, {cutoff:g} Hz) lags the attitude by {lag:.3f} s: "
+            "its phase was taken out before the knowledge was used (restoration.knowledge_dephasing)")
+
+
 def knowledge_timing_line(restoration) -> str | None:
     """The line saying the AOCS knowledge's latency the images measured and took out
     (:mod:`restore.knowledge_timing`), where it was significant; else None."""
@@ -456,7 +474,10 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
     offset = scene_offset_line_of_run(run, axes_r)
     if offset:
         lines.append(offset)
-    for lag in (knowledge_timing_line(run.restoration), knowledge_filter_line_of_run(run, axes_r)):
+    product_attrs = getattr(getattr(run, "product", None), "ds", None)
+    product_attrs = product_attrs.attrs if product_attrs is not None else {}
+    for lag in (knowledge_dephasing_line(product_attrs, run.restoration), knowledge_timing_line(run.restoration),
+                knowledge_filter_line_of_run(run, axes_r)):
         if lag:
             lines.append(lag)
     for notch in (notch_level_line(run.restoration, axes_r), notch_continuum_line_of_run(run, axes_r)):

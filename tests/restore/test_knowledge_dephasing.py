@@ -125,3 +125,17 @@ def test_the_stage_takes_the_lag_out_of_a_rendered_products_knowledge(causal_tin
         assert rms_after < 0.3 * rms_before, (a, rms_before, rms_after)
     off, none = stages.dephased_knowledge(product, dc_replace(s, knowledge_dephasing=False))
     assert off is product and none == {}
+
+
+def test_the_summary_says_the_knowledge_was_dephased_and_nothing_otherwise():
+    import xarray as xr
+
+    from reports.summary import knowledge_dephasing_line
+
+    attrs = {"knowledge_cutoff_hz": 4.0, "knowledge_filter_order": 4, "knowledge_filter": "butterworth_causal"}
+    done = xr.Dataset({"knowledge_dephasing_roll": ("time", np.zeros(4))})
+    line = knowledge_dephasing_line(attrs, done)
+    assert line is not None and "lags the attitude by 0.104 s" in line and "4 Hz" in line
+    assert knowledge_dephasing_line(attrs, xr.Dataset()) is None   # restored with knowledge_dephasing = false
+    assert knowledge_dephasing_line({**attrs, "knowledge_filter": "butterworth_zero_phase"}, done) is None
+    assert knowledge_dephasing_line({}, done) is None and knowledge_dephasing_line(attrs, None) is None
