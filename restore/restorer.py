@@ -141,7 +141,7 @@ class Restorer:
             sigma, checks = stages.raise_by_knowledge_check(
                 sigma, records, product, s, {a: knowledge[a] + estimate[a] + smoothing.get(a, 0.0) for a in AXES},
                 smoothings)
-            sigma = stages.raise_by_knowledge_filter(sigma, records, product)
+            sigma = stages.raise_by_knowledge_filter(sigma, records, product, self.latency)
             estimate, sigma, fusions = stages.fuse_knowledge_band(estimate, sigma, records, product, s)
             flag_limits: dict = {}
             estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad,

@@ -52,7 +52,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_error_prior", "knowledge_filter_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_latency", "advanced_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_error_prior", "knowledge_filter_errors", "knowledge_latency_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_latency", "advanced_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -1127,15 +1127,39 @@ def knowledge_filter_errors(records: dict, product: Product) -> dict:
             for a, rec in sorted(records.items())}
 
 
-def raise_by_knowledge_filter(sigma: dict, records: dict, product: Product) -> dict:
+def knowledge_latency_errors(records: dict, product: Product, latency) -> dict:
+    """``{axis: rad}``: the RMS error the knowledge's latency leaves where the restoration leans on the knowledge
+    in the latency's band (:mod:`restore.knowledge_timing`): what is still unknown of it, ``√(δ_left² + σ_δ²)``
+    (``δ_left`` the estimate where it was not taken out, 0 where it was), times the RMS of the knowledge's
+    derivative in that band, the share of it that is the attitude's (``1 − 1 / signal_to_noise``: its noise does
+    not move with a latency). Empty without an estimate."""
+    from .knowledge_timing import _band_derivative
+
+    if latency is None or not np.isfinite(latency.sigma_s):
+        return {}
+    left = 0.0 if latency.significant else float(latency.delay_s)
+    # the attitude's share of the derivative's power in the band: the knowledge's noise is not moved by a latency
+    share = max(0.0, 1.0 - 1.0 / latency.signal_to_noise) if latency.signal_to_noise > 0 else 0.0
+    unknown = float(np.hypot(left, latency.sigma_s)) * np.sqrt(share)
+    t = np.asarray(product.time, dtype=np.float64)
+    knowledge = dict(zip(AXES, product.knowledge.at(t)))
+    return {a: unknown * float(np.sqrt(np.mean(_band_derivative(np.asarray(knowledge[a], dtype=np.float64),
+                                                                   float(rec.line_period_s), latency.band_hz) ** 2)))
+            for a, rec in sorted(records.items()) if a in latency.axes}
+
+
+def raise_by_knowledge_filter(sigma: dict, records: dict, product: Product, latency=None) -> dict:
     """Each axis's σ raised in quadrature by the AOCS filter's own error below its high-pass
     (:func:`knowledge_filter_errors`): below the high-pass the restored angle is the knowledge, whose noise the
     draws hold but not its filter's error — nothing for a zero-phase filter well below its cut-off, the lag of a
     causal one (an unseen scene under a 4 Hz causal knowledge: 0.062 / 0.066 px predicted, 0.062 / 0.095 px of
-    the restored angle's error in that band). Like the knowledge check's raise, the same on every line
-    (``model_sigma`` keeps the σ before it). Returns a new dict."""
+    the restored angle's error in that band). With ``latency`` (:class:`restore.knowledge_timing.LatencyEstimate`)
+    also what is still unknown of the knowledge's latency (:func:`knowledge_latency_errors`). Like the knowledge
+    check's raise, the same on every line (``model_sigma`` keeps the σ before it). Returns a new dict."""
     out = dict(sigma)
-    for a, e in knowledge_filter_errors(records, product).items():
+    late = knowledge_latency_errors(records, product, latency)
+    errors = knowledge_filter_errors(records, product)
+    for a, e in {a: float(np.hypot(errors.get(a, 0.0), late.get(a, 0.0))) for a in set(errors) | set(late)}.items():
         ps = out.get(a)
         if ps is None or not e > 0:
             continue

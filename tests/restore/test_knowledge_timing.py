@@ -128,3 +128,36 @@ def test_a_knowledge_whose_band_holds_only_its_noise_measures_no_latency():
     recs2, kn2 = _records(0.015, pitch_only=True)
     est2 = knowledge_latency(recs2, kn2, (0.8, 3.3), noise_psd=psd)
     assert est2.signal_to_noise > 100 and est2.significant
+
+
+def test_sigma_holds_what_is_still_unknown_of_the_latency():
+    """A 2.2 Hz line of amplitude A: a latency known to σ_δ leaves σ_δ · 2π · 2.2 · A / √2 of error (to the 5 %
+    the band-pass of 3.5 cycles loses to its own leakage) where the
+    restoration leans on the knowledge; one not taken out leaves its own size too; σ takes it in quadrature."""
+    from restore.posterior import PosteriorSigma
+    from restore.stages import knowledge_latency_errors, raise_by_knowledge_filter
+    from simsat.attitude import AttitudeSeries
+
+    t = np.arange(N) * DT
+    amp = 4e-6
+    k = amp * np.sin(2 * np.pi * 2.2 * t)
+    product = SimpleNamespace(time=t, knowledge=AttitudeSeries(t, k, k, np.zeros(N)),
+                              ds=SimpleNamespace(attrs={}))
+    records = {"roll": SimpleNamespace(line_period_s=DT, highpass_hz=0.8)}
+    rate = 2 * np.pi * 2.2 * amp / np.sqrt(2)
+    taken = LatencyEstimate(delay_s=0.015, sigma_s=0.002, band_hz=(0.8, 3.3), axes=("roll",))
+    assert knowledge_latency_errors(records, product, taken)["roll"] == pytest.approx(0.002 * rate, rel=0.08)
+    left = LatencyEstimate(delay_s=0.003, sigma_s=0.002, band_hz=(0.8, 3.3), axes=("roll",))
+    assert not left.significant
+    assert knowledge_latency_errors(records, product, left)["roll"] == pytest.approx(np.hypot(0.003, 0.002) * rate,
+                                                                                     rel=0.08)
+    noise_only = LatencyEstimate(delay_s=0.003, sigma_s=0.002, band_hz=(0.8, 3.3), axes=("roll",),
+                                 signal_to_noise=1.0)
+    assert knowledge_latency_errors(records, product, noise_only)["roll"] == 0.0
+    assert knowledge_latency_errors(records, product, None) == {}
+    sig = np.full(N, 1e-8)
+    ps = PosteriorSigma(sigma=sig, noise_scale=1.0, samples=2, detrended_rms=1e-8, detrended_sigma=sig,
+                        error_power=np.zeros(N // 2 + 1))
+    out = raise_by_knowledge_filter({"roll": ps}, records, product, taken)["roll"]
+    np.testing.assert_allclose(out.sigma, np.hypot(sig, knowledge_latency_errors(records, product, taken)["roll"]))
+    np.testing.assert_array_equal(out.model_sigma, sig)
