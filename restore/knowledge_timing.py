@@ -28,7 +28,8 @@ and δ is not measured — but then a latency costs nothing either.
 
 It is taken out (:func:`restore.knowledge_dephasing.advance_samples`) only
 when it is at least :data:`MIN_SIGNIFICANCE` of its own σ and the knowledge's derivative in the band is the
-attitude's, not its white noise's (:data:`MIN_SIGNAL_TO_NOISE`).
+attitude's, not its white noise's (:data:`MIN_SIGNAL_TO_NOISE`), within the first-order model's reach
+(:data:`MAX_PHASE_RAD` at the band's top) and the same on every axis (:data:`AXES_AGREE_SIGMAS`).
 """
 from __future__ import annotations
 
@@ -37,7 +38,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 __all__ = ["LatencyEstimate", "latency_band", "knowledge_latency", "MIN_GAIN", "BLOCKS", "ITERATIONS",
-           "MIN_SIGNIFICANCE", "MIN_SIGNAL_TO_NOISE"]
+           "MIN_SIGNIFICANCE", "MIN_SIGNAL_TO_NOISE", "MAX_PHASE_RAD",
+           "AXES_AGREE_SIGMAS"]
 
 #: the band ends where the knowledge's filter passes less than this of the attitude
 MIN_GAIN = 0.9
@@ -49,6 +51,12 @@ ITERATIONS = 3
 #: there: where it is the noise's (phr_cmg: 1.3–1.6 ×, its attitude nothing between 2 and 7.6 Hz), the regression
 #: measures how the noise correlates with itself through the pairs, not a latency (−5.1 ± 1.0 ms there)
 MIN_SIGNAL_TO_NOISE = 4.0
+#: the Gauss–Newton steps reach this phase at the band's top [rad]: a larger estimate is not a
+#: latency the model can measure (low_frequencies' 2 Hz knowledge, lines at 3.3–7.7 Hz above its 0.4–1.6 Hz band:
+#: 765 ± 143 ms, its restored angle 0.030 / 0.039 → 0.142 / 0.169 px once taken)
+MAX_PHASE_RAD = 1.0
+#: each axis's own estimate must lie within this many of its σ from the joint one
+AXES_AGREE_SIGMAS = 3.0
 #: the regression's weights fall to zero over this fraction of the record at its ends (a Tukey window: the
 #: band-limited series leak least there)
 TAPER = 0.2
@@ -68,19 +76,40 @@ class LatencyEstimate:
     #: the power of the knowledge's derivative in the band over what its own white noise puts there (inf when
     #: the noise is not given)
     signal_to_noise: float = float("inf")
+    #: each axis's own estimate and its jackknife σ [s]: ``{axis: (delay, sigma)}`` (a time tag is late on every
+    #: axis alike)
+    axis_delays_s: dict | None = None
+
+    @property
+    def max_delay_s(self) -> float:
+        """The largest latency the first-order model holds: :data:`MAX_PHASE_RAD` at the band's top [s]."""
+        return MAX_PHASE_RAD / (2 * np.pi * float(self.band_hz[1]))
+
+    @property
+    def axes_agree(self) -> bool:
+        """Every axis's own estimate within :data:`AXES_AGREE_SIGMAS` of its σ from the joint one."""
+        return all(abs(d - self.delay_s) <= AXES_AGREE_SIGMAS * sg for d, sg in (self.axis_delays_s or {}).values())
+
+    @property
+    def measured(self) -> bool:
+        """A latency the regression can measure: on an attitude, not on the knowledge's noise
+        (:data:`MIN_SIGNAL_TO_NOISE`), within the model's reach (:attr:`max_delay_s`), the same on every axis
+        (:attr:`axes_agree`), with a finite σ."""
+        return bool(np.isfinite(self.delay_s) and np.isfinite(self.sigma_s) and self.sigma_s > 0
+                    and self.signal_to_noise >= MIN_SIGNAL_TO_NOISE
+                    and abs(self.delay_s) <= self.max_delay_s and self.axes_agree)
 
     @property
     def significant(self) -> bool:
-        """At least :data:`MIN_SIGNIFICANCE` σ from zero, measured on an attitude, not on the knowledge's noise
-        (:data:`MIN_SIGNAL_TO_NOISE`)."""
-        return bool(np.isfinite(self.delay_s) and self.sigma_s > 0
-                    and abs(self.delay_s) >= MIN_SIGNIFICANCE * self.sigma_s
-                    and self.signal_to_noise >= MIN_SIGNAL_TO_NOISE)
+        """:attr:`measured` and at least :data:`MIN_SIGNIFICANCE` σ from zero: taken out."""
+        return self.measured and abs(self.delay_s) >= MIN_SIGNIFICANCE * self.sigma_s
 
     def to_dict(self) -> dict:
         d = asdict(self)
         d["band_hz"] = list(self.band_hz)
         d["axes"] = list(self.axes)
+        d["axis_delays_s"] = {a: list(v) for a, v in (self.axis_delays_s or {}).items()}
+        d["measured"] = self.measured
         d["significant"] = self.significant
         return d
 
@@ -203,11 +232,15 @@ def knowledge_latency(records: dict, knowledge: dict, band, *, noise_psd=None) -
         if not sxx.sum() > 0:
             return None
         delay += float(sxy.sum() / sxx.sum())
-    left_out = np.array([(sxy.sum() - sxy[b]) / (sxx.sum() - sxx[b]) if sxx.sum() - sxx[b] > 0 else np.nan
-                         for b in range(BLOCKS)])
-    left_out = left_out[np.isfinite(left_out)]
-    k = left_out.size
-    sigma = float(np.sqrt((k - 1) / k * np.sum((left_out - left_out.mean()) ** 2))) if k > 2 else float("inf")
+    step = float(sxy.sum() / sxx.sum())
+    sigma = _jackknife(sxy, sxx)
+    per_axis = {}
+    if len(axes) > 1:
+        for a in axes:
+            mine = [i for i, item in enumerate(lay) if item[0] == a]
+            axy, axx = _sums([ys[i] for i in mine], [xs[i] for i in mine], [ws[i] for i in mine], edges)
+            if axx.sum() > 0:
+                per_axis[a] = (delay - step + float(axy.sum() / axx.sum()), _jackknife(axy, axx))
     snr = float("inf")
     if noise_psd is not None:
         f = np.linspace(float(band[0]), float(band[1]), 2001)
@@ -216,4 +249,13 @@ def knowledge_latency(records: dict, knowledge: dict, band, *, noise_psd=None) -
                          for a in axes])
         snr = float(power / noise) if noise > 0 else float("inf")
     return LatencyEstimate(delay_s=delay, sigma_s=sigma, band_hz=(float(band[0]), float(band[1])), axes=axes,
-                           signal_to_noise=snr)
+                           signal_to_noise=snr, axis_delays_s=per_axis or None)
+
+
+def _jackknife(sxy: np.ndarray, sxx: np.ndarray) -> float:
+    """Delete-one-block jackknife σ of ``Σ sxy / Σ sxx`` over the blocks."""
+    left_out = np.array([(sxy.sum() - sxy[b]) / (sxx.sum() - sxx[b]) if sxx.sum() - sxx[b] > 0 else np.nan
+                         for b in range(sxy.size)])
+    left_out = left_out[np.isfinite(left_out)]
+    k = left_out.size
+    return float(np.sqrt((k - 1) / k * np.sum((left_out - left_out.mean()) ** 2))) if k > 2 else float("inf")

@@ -1130,12 +1130,13 @@ def knowledge_filter_errors(records: dict, product: Product) -> dict:
 def knowledge_latency_errors(records: dict, product: Product, latency) -> dict:
     """``{axis: rad}``: the RMS error the knowledge's latency leaves where the restoration leans on the knowledge
     in the latency's band (:mod:`restore.knowledge_timing`): what is still unknown of it, ``√(δ_left² + σ_δ²)``
-    (``δ_left`` the estimate where it was not taken out, 0 where it was), times the RMS of the knowledge's
+    (``δ_left`` the estimate where it was not taken out, 0 where it was; nothing where the regression measured no
+    latency: ``LatencyEstimate.measured``), times the RMS of the knowledge's
     derivative in that band, the share of it that is the attitude's (``1 − 1 / signal_to_noise``: its noise does
     not move with a latency). Empty without an estimate."""
     from .knowledge_timing import _band_derivative
 
-    if latency is None or not np.isfinite(latency.sigma_s):
+    if latency is None or not latency.measured:
         return {}
     left = 0.0 if latency.significant else float(latency.delay_s)
     # the attitude's share of the derivative's power in the band: the knowledge's noise is not moved by a latency

@@ -153,7 +153,9 @@ def test_sigma_holds_what_is_still_unknown_of_the_latency():
                                                                                      rel=0.08)
     noise_only = LatencyEstimate(delay_s=0.003, sigma_s=0.002, band_hz=(0.8, 3.3), axes=("roll",),
                                  signal_to_noise=1.0)
-    assert knowledge_latency_errors(records, product, noise_only)["roll"] == 0.0
+    assert not noise_only.measured and knowledge_latency_errors(records, product, noise_only) == {}
+    far = LatencyEstimate(delay_s=0.3, sigma_s=0.05, band_hz=(0.8, 3.3), axes=("roll",))
+    assert not far.measured and knowledge_latency_errors(records, product, far) == {}
     assert knowledge_latency_errors(records, product, None) == {}
     sig = np.full(N, 1e-8)
     ps = PosteriorSigma(sigma=sig, noise_scale=1.0, samples=2, detrended_rms=1e-8, detrended_sigma=sig,
@@ -161,3 +163,27 @@ def test_sigma_holds_what_is_still_unknown_of_the_latency():
     out = raise_by_knowledge_filter({"roll": ps}, records, product, taken)["roll"]
     np.testing.assert_allclose(out.sigma, np.hypot(sig, knowledge_latency_errors(records, product, taken)["roll"]))
     np.testing.assert_array_equal(out.model_sigma, sig)
+
+
+def test_a_latency_beyond_the_models_reach_or_not_common_to_the_axes_is_not_taken():
+    """Beyond 1 rad at the band's top the estimate is not a latency the model measures; a latency on one axis
+    only is not a time tag's."""
+    far = LatencyEstimate(delay_s=0.765, sigma_s=0.143, band_hz=(0.4, 1.6), axes=("pitch", "roll"),
+                          signal_to_noise=11.8)
+    assert far.max_delay_s == pytest.approx(1.0 / (2 * np.pi * 1.6)) and not far.significant
+    recs, kn = _records(0.015)
+    est = knowledge_latency(recs, kn, (0.8, 3.3))
+    assert est.axes_agree and set(est.axis_delays_s) == {"roll", "pitch"}
+    for d, sg in est.axis_delays_s.values():
+        assert d == pytest.approx(0.015, abs=1e-3) and sg > 0
+    # roll's knowledge on time, pitch's 15 ms late: the joint estimate falls between, the axes disagree
+    t = np.arange(N) * DT
+    on_time, _ = _attitude(t)
+    recs["roll"].diffs = recs["roll"].diffs + np.array(
+        [predicted_differential(kn["roll"] - on_time, tau, DT) for tau in TAUS])
+    recs["roll"].increment = recs["roll"].increment + (kn["roll"] - on_time)
+    split = knowledge_latency(recs, {"roll": on_time, "pitch": kn["pitch"]}, (0.8, 3.3))
+    # (each axis's own estimate is one linear step from the joint one: 2 ms of the first-order model's error)
+    assert split.axis_delays_s["roll"][0] == pytest.approx(0.0, abs=2e-3)
+    assert split.axis_delays_s["pitch"][0] == pytest.approx(0.015, abs=2e-3)
+    assert not split.axes_agree and not split.significant, split
