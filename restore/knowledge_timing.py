@@ -128,27 +128,26 @@ def latency_band(highpass_hz: float, gain, *, top_hz: float) -> tuple[float, flo
 
 
 def _band_derivative(k: np.ndarray, dt: float, band) -> np.ndarray:
-    """``d/dt`` of ``k`` band-limited to ``band`` (FFT of the record extended by its mirror image)."""
-    n = k.size
-    xe = np.concatenate([k, k[::-1]])
+    """``d/dt`` of ``k`` band-limited to ``band`` (:func:`_band_filtered`)."""
+    return _band_filtered(k, dt, band, derivative=True)
+
+
+def _band_filtered(y: np.ndarray, dt: float, band, *, derivative: bool = False) -> np.ndarray:
+    """``y`` (or its derivative) band-limited to ``band`` by FFT of the record extended by its mirror image."""
+    n = y.size
     f = np.fft.rfftfreq(2 * n, dt)
-    keep = (f >= band[0]) & (f <= band[1])
-    return np.fft.irfft(np.fft.rfft(xe) * keep * (2j * np.pi * f), 2 * n)[:n]
+    gain = ((f >= band[0]) & (f <= band[1])) * ((2j * np.pi * f) if derivative else 1.0)
+    return np.fft.irfft(np.fft.rfft(np.concatenate([y, y[::-1]])) * gain, 2 * n)[:n]
 
 
 def _band_passed(y: np.ndarray, dt: float, band) -> np.ndarray:
-    """``y`` band-limited to ``band`` (gaps bridged linearly for the FFT, NaN again after; the record extended
-    by its mirror image)."""
+    """``y`` band-limited to ``band`` (gaps bridged linearly for the FFT, NaN again after)."""
     n = y.size
     ok = np.isfinite(y)
     if np.count_nonzero(ok) < 2:
         return np.full(n, np.nan)
     i = np.arange(n)
-    ye = np.where(ok, y, np.interp(i, i[ok], y[ok]))
-    ye = np.concatenate([ye, ye[::-1]])
-    f = np.fft.rfftfreq(2 * n, dt)
-    keep = (f >= band[0]) & (f <= band[1])
-    return np.where(ok, np.fft.irfft(np.fft.rfft(ye) * keep, 2 * n)[:n], np.nan)
+    return np.where(ok, _band_filtered(np.where(ok, y, np.interp(i, i[ok], y[ok])), dt, band), np.nan)
 
 
 def _differential(series: np.ndarray, tau: float, dt: float, lag) -> np.ndarray:

@@ -878,10 +878,16 @@ def dephased_knowledge(product: Product, settings: RestorationSettings) -> tuple
                                   for a in AXES))
     ds = product.ds.copy(deep=False)
     ds.attrs = {**dict(attrs), "knowledge_filter": DEPHASABLE_KINDS[kind], "knowledge_filter_recorded": kind}
-    out = replace(product, ds=ds, knowledge=series)
+    return _with_knowledge(replace(product, ds=ds), series)
+
+
+def _with_knowledge(product: Product, series: AttitudeSeries) -> tuple[Product, dict]:
+    """The product with ``series`` for its knowledge, and ``{axis: (line,)}``: the new knowledge less the old at
+    the lines [rad]."""
     t = product.time
     before, after = product.knowledge.at(t), series.at(t)
-    return out, {a: np.asarray(after[i] - before[i], dtype=np.float64) for i, a in enumerate(AXES)}
+    return replace(product, knowledge=series), {a: np.asarray(after[i] - before[i], dtype=np.float64)
+                                                 for i, a in enumerate(AXES)}
 
 
 def knowledge_latency(records: dict, knowledge: dict, product: Product, settings: RestorationSettings):
@@ -928,11 +934,7 @@ def advanced_knowledge(product: Product, delay_s: float) -> tuple[Product, dict]
     kn = product.knowledge
     tk = np.asarray(kn.time, dtype=np.float64)
     dt = float(np.median(np.diff(tk)))
-    series = AttitudeSeries(tk, *(advance_samples(getattr(kn, a), dt, delay_s) for a in AXES))
-    out = replace(product, knowledge=series)
-    t = product.time
-    before, after = kn.at(t), series.at(t)
-    return out, {a: np.asarray(after[i] - before[i], dtype=np.float64) for i, a in enumerate(AXES)}
+    return _with_knowledge(product, AttitudeSeries(tk, *(advance_samples(getattr(kn, a), dt, delay_s) for a in AXES)))
 
 
 def knowledge_smoothings(product: Product, settings: RestorationSettings, axes) -> dict:
