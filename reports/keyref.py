@@ -190,8 +190,8 @@ MEANING = {
                                        "the latency is not (it is not recorded)",
     "restoration.knowledge_timing": "measure the AOCS knowledge's latency from the images (each pair's "
                                     "differentials of what the knowledge misses, regressed on those of its "
-                                    "derivative, from the high-pass to where its filter passes 90 %; σ by a "
-                                    "jackknife) and, where it is 4 σ or more and the knowledge's derivative there "
+                                    "derivative, from the high-pass to where its filter passes 90 %; σ from the "
+                                    "residuals' spectrum) and, where it is 3 σ or more and the knowledge's derivative there "
                                     "is the attitude's (4 × its noise's or more), advance the knowledge by it and "
                                     "integrate again. A latency the knowledge does not record is an error the "
                                     "prior's ceiling, the low band and the conditioning all take for known",

@@ -493,8 +493,8 @@ def _explained_lines(run, unc) -> tuple:
          ". Where both the images and the knowledge see the attitude (above the high-pass, where the knowledge's "
          "filter passes 90 % or more), the attitude the knowledge misses is, to first order, its latency times "
          "its rate: each pair's differentials of it were regressed on those of the knowledge's derivative, the "
-         "σ a jackknife over eight stretches of the record, and the knowledge advanced where the latency was "
-         "four σ or more (restore.knowledge_timing)."),
+         "σ from the residuals' spectrum (or a jackknife over eight stretches of the record, if larger), and the "
+         "knowledge advanced where the latency was three σ or more (restore.knowledge_timing)."),
         (knowledge_filter_line_of_run(run, list(unc)),
          ". Below the high-pass the images' estimate is discarded (the differentials see little there and a band's "
          "slow bias would pass for attitude) and the restored angle is the knowledge: its noise is smoothed and "
