@@ -934,7 +934,10 @@ def advanced_knowledge(product: Product, delay_s: float) -> tuple[Product, dict]
     kn = product.knowledge
     tk = np.asarray(kn.time, dtype=np.float64)
     dt = float(np.median(np.diff(tk)))
-    return _with_knowledge(product, AttitudeSeries(tk, *(advance_samples(getattr(kn, a), dt, delay_s) for a in AXES)))
+    cutoff = product.ds.attrs.get("knowledge_cutoff_hz")
+    memory = 1.0 / float(cutoff) if cutoff is not None and np.isfinite(float(cutoff)) and float(cutoff) > 0 else None
+    return _with_knowledge(product, AttitudeSeries(tk, *(advance_samples(getattr(kn, a), dt, delay_s, memory_s=memory)
+                                                         for a in AXES)))
 
 
 def knowledge_smoothings(product: Product, settings: RestorationSettings, axes) -> dict:

@@ -139,3 +139,24 @@ def test_the_summary_says_the_knowledge_was_dephased_and_nothing_otherwise():
     assert knowledge_dephasing_line(attrs, xr.Dataset()) is None   # restored with knowledge_dephasing = false
     assert knowledge_dephasing_line({**attrs, "knowledge_filter": "butterworth_zero_phase"}, done) is None
     assert knowledge_dephasing_line({}, done) is None and knowledge_dephasing_line(attrs, None) is None
+
+
+def test_the_records_end_is_predicted_not_reflected():
+    """Over the record's last 0.1 s the all-pass needs the knowledge of the next group delay: a 2.2 Hz line
+    (on a bias and a drift) continued by linear prediction comes back within 2 % of its amplitude there, and
+    over the first 0.1 s (predicted backwards) too; the point reflection alone (a straight line past the end)
+    leaves 10 times that."""
+    from restore.knowledge_dephasing import _all_passed, _phase
+
+    def signal(s):
+        return np.sin(2 * np.pi * 2.2 * s + 0.4) + 0.3 + 0.2 * s
+    t, k, x = _causal_knowledge(signal, span=1.6)
+    gain = np.abs(knowledge_response(np.array([2.2]), FC, 4, "butterworth_causal"))[0]
+    want = gain * np.sin(2 * np.pi * 2.2 * t + 0.4) + 0.3 + 0.2 * t
+    end = t > t[-1] - 0.1
+    d = dephase_samples(k, 1 / RATE, cutoff_hz=FC, order=4)
+    assert np.max(np.abs(d - want)[t < 0.1]) < 0.02
+    reflected = _all_passed(k, 1 / RATE, lambda f: -_phase(f, FC, 4, "butterworth_causal"),
+                            group_delay_at_zero(FC, 4), 8.0 / FC)
+    assert np.max(np.abs(d - want)[end]) < 0.02
+    assert np.max(np.abs(reflected - want)[end]) > 0.2
