@@ -14,15 +14,17 @@ where it was and turns the knowledge into ``|F| θ + n′``, a zero-phase filter
 gain ``|F|`` (:func:`restore.knowledge_prior.knowledge_response` kind
 ``butterworth_dephased``). An all-pass is not causal: near the record's end it
 needs the knowledge of the next group delay, which does not exist. The samples
-are extended at both ends by their point reflection (``2 k(T) − k(2T − t)``,
-which continues the record's slope: a linear extrapolation, exact for a trend,
-``s² θ''`` for a curvature over ``s`` past the end) over a few filter time
-constants, a straight line through the extension's two ends is taken out so
-that the periodic FFT sees no jump, and added back advanced by the group
-delay at zero frequency (what the all-pass does to a line).
+are extended at both ends over a few filter time constants: for the first
+:data:`PREDICTION_SPAN_S` by linear prediction (:func:`predicted_tail`, an
+autoregression fitted on the record, backwards at the start), then by their
+point reflection (``2 k(T) − k(2T − t)``, which continues the record's slope:
+exact for a trend, but a 2.2 Hz line continued as a straight line was 1.7 of its
+amplitude wrong over the last 0.1 s); a straight line through the extension's
+two ends is taken out so that the periodic FFT sees no jump, and added back
+advanced by the group delay at zero frequency (what the all-pass does to a line).
 
 What stays is the latency (``delay_ms``: not recorded, so not known) and the
-extrapolation over the record's last group delay.
+prediction's error over the record's last group delay.
 """
 from __future__ import annotations
 
