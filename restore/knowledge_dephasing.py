@@ -113,8 +113,10 @@ def advance_samples(values, dt: float, advance_s: float, *, extension_s: float |
                     memory_s: float | None = None) -> np.ndarray:
     """The samples advanced in time by ``advance_s`` [s] (``x(t + advance_s)``; a negative value delays them):
     the all-pass ``e^{i 2π f advance_s}`` with the same ends as :func:`dephase_samples` (point reflection over
-    ``extension_s``, by default 2 s or 4 × the advance, whichever is longer). Used to take a latency the images
-    measured out of the knowledge (:mod:`restore.knowledge_timing`).
+    ``extension_s``, by default 2 s or 4 × the advance, whichever is longer; with ``memory_s``, linear prediction
+    of that memory over its first :data:`PREDICTION_SPAN_S`). Used to take a latency the images measured out of
+    the knowledge (:mod:`restore.knowledge_timing`; :func:`restore.stages.advanced_knowledge` gives one cut-off
+    period as the memory).
 
     Examples
     --------
@@ -133,9 +135,8 @@ def predicted_tail(x, m: int, order: int, valid=None) -> np.ndarray | None:
     """``m`` samples past the end of ``x`` by linear prediction: a least-squares autoregression of ``order`` on
     ``x`` less its straight line (fitted on the stretches of ``order + 1`` samples that are all ``valid``: a gap
     bridged by a straight line is no sample of the process), run forward, the line continued. None when ``x`` is
-    too short for it
-    (fewer than :data:`PREDICTION_SAMPLES_PER_ORDER` × ``order`` samples) or the prediction leaves the record's
-    range by more than :data:`PREDICTION_RANGE` × (an unstable fit).
+    too short for it (fewer than :data:`PREDICTION_SAMPLES_PER_ORDER` × ``order`` samples) or the prediction
+    leaves the record's range by more than :data:`PREDICTION_RANGE` × (an unstable fit).
 
     Examples
     --------

@@ -68,8 +68,6 @@ TAPER = 0.2
 MIN_SIGNIFICANCE = 3.0
 #: the residuals' cross-spectrum is averaged over the in-band bins within this many of each (:func:`spectral_sigma`)
 SMOOTH_BINS = 3
-#: and taken over the band widened by this many bins at each end (the record's DFT leaks the band-limited series there)
-MARGIN_BINS = 0
 
 
 @dataclass(frozen=True)
@@ -298,8 +296,7 @@ def spectral_sigma(ys, xs, ws, step: float, dt: float, band, *, half_width: int 
         return float("inf")
     n = a_rows[0].size
     f = np.fft.rfftfreq(n, dt)
-    df = f[1] - f[0] if f.size > 1 else 1.0
-    k_in = np.nonzero((f >= band[0] - MARGIN_BINS * df) & (f <= band[1] + MARGIN_BINS * df) & (f > 0))[0]
+    k_in = np.nonzero((f >= band[0]) & (f <= band[1]) & (f > 0))[0]
     if not k_in.size:
         return float("inf")
     a = np.fft.rfft(np.array(a_rows), axis=1)[:, k_in]          # (series, bins)
