@@ -494,7 +494,8 @@ def _explained_lines(run, unc) -> tuple:
          "filter passes 90 % or more), the attitude the knowledge misses is, to first order, its latency times "
          "its rate: each pair's differentials of it were regressed on those of the knowledge's derivative, the "
          "σ from the residuals' spectrum (or a jackknife over eight stretches of the record, if larger), and the "
-         "knowledge advanced where the latency was three σ or more (restore.knowledge_timing)."),
+         "knowledge advanced by the estimate shrunk by its σ, δ (1 − σ²/δ²), nothing within one σ of zero "
+         "(restore.knowledge_timing)."),
         (knowledge_filter_line_of_run(run, list(unc)),
          ". Below the high-pass the images' estimate is discarded (the differentials see little there and a band's "
          "slow bias would pass for attitude) and the restored angle is the knowledge: its noise is smoothed and "

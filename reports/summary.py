@@ -351,17 +351,18 @@ def knowledge_dephasing_line(product_attrs, restoration) -> str | None:
 
 def knowledge_timing_line(restoration) -> str | None:
     """The line saying the AOCS knowledge's latency the images measured and took out
-    (:mod:`restore.knowledge_timing`), where it was significant; else None."""
+    (:mod:`restore.knowledge_timing`), where it was taken out (shrunk by its σ); else None."""
     import json
 
     if restoration is None:
         return None
     est = json.loads(restoration.attrs.get("knowledge_latency", "{}") or "{}")
-    if not est or not est.get("significant"):
+    if not est or not est.get("taken"):
         return None
     lo, hi = est["band_hz"]
     return (f"  the AOCS knowledge was {est['delay_s'] * 1e3:.1f} ± {est['sigma_s'] * 1e3:.1f} ms late against the "
-            f"images ({', '.join(est['axes'])} at {lo:.2f}–{hi:.2f} Hz): advanced by that before it was used")
+            f"images ({', '.join(est['axes'])} at {lo:.2f}–{hi:.2f} Hz): advanced by {est['applied_s'] * 1e3:.1f} ms "
+            "(the estimate shrunk by its σ) before it was used")
 
 
 def knowledge_filter_line_of_run(run, axes) -> str | None:

@@ -331,17 +331,17 @@ class Restorer:
     def time_knowledge(self, product: Product, knowledge: dict, dephasing: dict, pairs: list, records: dict,
                        estimate: dict, timings: dict, bar) -> tuple:
         """With ``knowledge_timing``: the AOCS knowledge's latency as the images measure it
-        (:func:`stages.knowledge_latency`); where it is significant, the knowledge advanced by it
+        (:func:`stages.knowledge_latency`); where it is taken, the knowledge advanced by it shrunk by its σ
         (:func:`stages.advanced_knowledge`, added to ``dephasing``: part of the correction) and every axis
         integrated again. Returns ``(product, knowledge, dephasing, (pairs, records, estimate))``, new or as
         given; the estimate is kept in ``self.latency``."""
         t = _time.perf_counter()
         self.latency = est = stages.knowledge_latency(records, knowledge, product, self.settings)
-        if est is None or not est.significant:
+        if est is None or not est.taken:
             return product, knowledge, dephasing, (pairs, records, estimate)
         bar.note(f"AOCS knowledge {est.delay_s * 1e3:.1f} ± {est.sigma_s * 1e3:.1f} ms late against the images: "
-                 "advanced by that, integrating again")
-        product, moved = stages.advanced_knowledge(product, est.delay_s)
+                 f"advanced by {est.applied_s * 1e3:.1f} ms (shrunk by its σ), integrating again")
+        product, moved = stages.advanced_knowledge(product, est.applied_s)
         knowledge = dict(zip(AXES, product.knowledge.at(product.time)))
         dephasing = {a: dephasing.get(a, 0.0) + moved[a] for a in AXES}
         out = self.synthesise_and_integrate(product, pairs, knowledge, {}, bar.notes_only())

@@ -929,13 +929,14 @@ def advanced_knowledge(product: Product, delay_s: float) -> tuple[Product, dict]
     """The product with its knowledge samples advanced by ``delay_s`` (the knowledge at t then describes t:
     :func:`restore.knowledge_dephasing.advance_samples`), and ``{axis: (line,)}``, the advanced knowledge less
     the given one at the lines [rad]."""
-    from .knowledge_dephasing import advance_samples
+    from .knowledge_dephasing import advance_samples, prediction_memory_s
 
     kn = product.knowledge
     tk = np.asarray(kn.time, dtype=np.float64)
     dt = float(np.median(np.diff(tk)))
     cutoff = product.ds.attrs.get("knowledge_cutoff_hz")
-    memory = 1.0 / float(cutoff) if cutoff is not None and np.isfinite(float(cutoff)) and float(cutoff) > 0 else None
+    memory = prediction_memory_s(float(cutoff)) if cutoff is not None and np.isfinite(float(cutoff)) \
+        and float(cutoff) > 0 else None
     return _with_knowledge(product, AttitudeSeries(tk, *(advance_samples(getattr(kn, a), dt, delay_s, memory_s=memory)
                                                          for a in AXES)))
 
@@ -1135,15 +1136,15 @@ def knowledge_filter_errors(records: dict, product: Product) -> dict:
 def knowledge_latency_errors(records: dict, product: Product, latency) -> dict:
     """``{axis: rad}``: the RMS error the knowledge's latency leaves where the restoration leans on the knowledge
     in the latency's band (:mod:`restore.knowledge_timing`): what is still unknown of it, ``√(δ_left² + σ_δ²)``
-    (``δ_left`` the estimate where it was not taken out, 0 where it was; nothing where the regression measured no
-    latency: ``LatencyEstimate.measured``), times the RMS of the knowledge's
+    (``δ_left`` the part of the estimate not taken out, ``δ − LatencyEstimate.applied_s``; nothing where the
+    regression measured no latency: ``LatencyEstimate.measured``), times the RMS of the knowledge's
     derivative in that band, the share of it that is the attitude's (``1 − 1 / signal_to_noise``: its noise does
     not move with a latency). Empty without an estimate."""
     from .knowledge_timing import _band_derivative
 
     if latency is None or not latency.measured:
         return {}
-    left = 0.0 if latency.significant else float(latency.delay_s)
+    left = float(latency.delay_s) - latency.applied_s
     # the attitude's share of the derivative's power in the band: the knowledge's noise is not moved by a latency
     share = max(0.0, 1.0 - 1.0 / latency.signal_to_noise) if latency.signal_to_noise > 0 else 0.0
     unknown = float(np.hypot(left, latency.sigma_s)) * np.sqrt(share)

@@ -160,3 +160,40 @@ def test_the_records_end_is_predicted_not_reflected():
                             group_delay_at_zero(FC, 4), 8.0 / FC)
     assert np.max(np.abs(d - want)[end]) < 0.02
     assert np.max(np.abs(reflected - want)[end]) > 0.2
+
+
+def test_stable_coefficients_keep_the_spectrum_and_put_every_root_inside():
+    """Reflecting a root z into 1/z̄ scales |A(e^{iω})| by |z| at every ω: the autoregression's spectral shape is
+    kept, its prediction no longer grows."""
+    from restore.knowledge_dephasing import stable_coefficients
+
+    rng = np.random.default_rng(3)
+    w = np.linspace(0, np.pi, 257)
+    for _ in range(20):
+        c = rng.normal(0.0, 0.6, 12)
+        s = stable_coefficients(c)
+        roots = np.roots(np.concatenate([[1.0], -s[::-1]]))
+        assert np.all(np.abs(roots) <= 1.0 + 1e-6)
+
+        def gain(coef):
+            a = np.concatenate([[1.0], -np.asarray(coef)[::-1]])
+            return np.abs(np.polyval(a, np.exp(1j * w)))
+        ratio = gain(c) / gain(s)
+        assert np.ptp(ratio) < 1e-6 * ratio.mean()
+    inside = np.array([-0.25, 1.0])
+    np.testing.assert_array_equal(stable_coefficients(inside), inside)
+
+
+def test_a_gap_lowers_the_order_instead_of_dropping_the_prediction():
+    """Two lines under a causal 4 Hz filter, a gap of 4 samples: the prediction still comes (a lower order, the
+    rows the gap leaves) and ends within 0.02 of the whole record's; a record too short for any order gets none."""
+    from restore.knowledge_dephasing import predicted_tail
+
+    t, k, x = _causal_knowledge(lambda s: np.sin(2 * np.pi * 1.3 * s) + 0.5 * np.sin(2 * np.pi * 2.9 * s + 1.0))
+    ok = np.ones(k.size, dtype=bool)
+    ok[40:44] = False
+    holed = np.where(ok, k, np.interp(np.arange(k.size), np.flatnonzero(ok), k[ok]))
+    whole = predicted_tail(k, 16, 42)
+    gapped = predicted_tail(holed, 16, 42, valid=ok)
+    assert gapped is not None and np.max(np.abs(gapped - whole)) < 0.02
+    assert predicted_tail(k[:2], 4, 8) is None

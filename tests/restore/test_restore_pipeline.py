@@ -317,9 +317,11 @@ def test_restoration_round_trips_through_its_file(tiny_restored):
         assert back.coverage[a] == res.coverage[a]
     assert back.settings == res.settings and back.method == res.method and back.anchored == res.anchored
     assert back.pixel_ifov_rad == res.pixel_ifov_rad
-    # the knowledge's latency as the images measured it (tiny's knowledge has none: measured, not taken out)
+    # the knowledge's latency as the images measured it (tiny's knowledge has none: measured, at most shrunk to a
+    # small advance)
     assert back.knowledge_latency == res.knowledge_latency and "delay_s" in res.knowledge_latency
-    assert not res.knowledge_latency["significant"] and not res.knowledge_dephasing
+    lat = res.knowledge_latency
+    assert abs(lat["applied_s"]) <= abs(lat["delay_s"]) and (lat["taken"] or not res.knowledge_dephasing)
     assert [p.name for p in back.pairs] == [p.name for p in res.pairs]
     for p, q in zip(back.pairs, res.pairs):
         assert (p.ahead, p.behind, p.tau_s, p.nominal_tau_s) == (q.ahead, q.behind, q.tau_s, q.nominal_tau_s)
