@@ -191,9 +191,9 @@ MEANING = {
     "restoration.knowledge_timing": "measure the AOCS knowledge's latency from the images (each pair's "
                                     "differentials of what the knowledge misses, regressed on those of its "
                                     "derivative, from the high-pass to where its filter passes 90 %; σ from the "
-                                    "residuals' spectrum) and, where it is 3 σ or more and the knowledge's derivative there "
-                                    "is the attitude's (4 × its noise's or more), advance the knowledge by it and "
-                                    "integrate again. A latency the knowledge does not record is an error the "
+                                    "residuals' spectrum) and, where the knowledge's derivative there is the attitude's (4 × "
+                                    "its noise's or more), advance the knowledge by it shrunk by its σ (δ (1 − σ²/δ²), "
+                                    "nothing within one σ of zero) and integrate again. A latency the knowledge does not record is an error the "
                                     "prior's ceiling, the low band and the conditioning all take for known",
     "restoration.knowledge_smoothing": "below the high-pass, where the restored angle is the AOCS knowledge's, "
     "take its white noise out: a quadratic kept whole, then each DCT coefficient of the knowledge samples' rest "
