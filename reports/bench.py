@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from reports import bench_integration, bench_matching
+from reports import bench_integration, bench_knowledge, bench_matching
 from reports.history import HISTORY_FILE, append_record, make_record
 from reports.matching_lock import matching_lock
 from reports.metrics import (
@@ -301,6 +301,8 @@ def run_bench(what: str, *, scenario: str | None = None, out: str | None = None,
         result = bench_matching.bench_matching(seed=seed)
     elif what == "integration":
         result = bench_integration.bench_integration(seed=seed)
+    elif what == "knowledge":
+        result = bench_knowledge.bench_knowledge(seeds=lines or 30, progress=lambda m: print(f"bench: {m}", flush=True))
     elif what == "memory":
         result = bench_memory(scenario=scenario, lines=lines)
     elif what == "robustness":
@@ -607,6 +609,8 @@ def format_result(what: str, result: dict) -> str:
     lines = []
     if what == "robustness":
         return "\n".join(_format_robustness(r))
+    if what == "knowledge":
+        return bench_knowledge.format_table(r)
     if what == "navigation":
         from .bench_navigation import format_navigation
 

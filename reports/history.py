@@ -101,6 +101,11 @@ def figures_of(what: str, result: dict) -> dict:
             if "error" in e:
                 continue
             out.update(_run_figures(f"{e['scenario']}.", e))
+    elif what == "knowledge":
+        for row in r.get("rows", []):
+            key = f"{row['scenario']}.{row['cutoff_hz']:g}Hz"
+            out[f"{key}.predicted_rms_px"] = float(row["predicted"]["rms_px"])
+            out[f"{key}.predicted_end_rms_px"] = float(row["predicted"]["end_rms_px"])
     elif what == "navigation":
         sm = r.get("summary", {})
         out["navigation.final_horizontal_p95_m"] = float(sm["final_horizontal_m"]["p95"])

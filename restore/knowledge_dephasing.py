@@ -48,9 +48,10 @@ EXTENSION_TIME_CONSTANTS = 8.0
 #: differed from the whole record's by 1.6 px over the cut's last 20 ms, by 0.4–0.6 px with the prediction)
 PREDICTION_SPAN_S = 0.5
 #: the prediction's autoregression remembers this many periods of the knowledge's cut-off, or as many of them as
-#: the record holds (:func:`predicted_tail`). Over 30 draws each of six attitude kinds (lines at 2.2 / 5.5 / 9 Hz,
-#: lines at 3–8 Hz, a damped chirp, CMG lines at 4 ×, broadband jitter, a real AOCS's) under a causal 2, 4 and 8 Hz
-#: knowledge 15 ms late, one period unstabilised (the first choice) left 0.013–0.060 px RMS below 1 Hz in the
+#: the record holds (:func:`predicted_tail`). Over 30 draws each of five attitude kinds (lines at 2.2 / 5.5 / 9 Hz,
+#: lines at 3–8 Hz, a damped chirp, CMG lines far above the knowledge, broadband jitter) under a causal 2, 4 and
+#: 8 Hz knowledge 15 ms late (`simsat bench knowledge`, :mod:`reports.bench_knowledge`), one period unstabilised
+#: (the first choice) left 0.013–0.060 px RMS below 1 Hz in the
 #: advanced knowledge, four periods stabilised 0.013–0.040: the two kinds of lines under a 4 Hz knowledge
 #: 0.049 → 0.019 and 0.060 → 0.018, under 8 Hz 0.041 → 0.015 and 0.033 → 0.014, the chirp under 4 Hz 0.020 → 0.016,
 #: the rest within ± 0.003 (broadband under 8 Hz 0.019 → 0.023). Orders

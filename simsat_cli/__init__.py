@@ -226,7 +226,8 @@ def cmd_bench(args) -> int:
     if overrides and args.what not in bench.OVERRIDABLE:
         raise CliError(f"--set: only `simsat bench {' / '.join(bench.OVERRIDABLE)}` take scenario overrides")
     result = bench.run_bench(args.what, scenario=args.scenario, out=args.out,
-                             lines=args.seeds if args.what == "navigation" else args.lines, seed=args.seed,
+                             lines=args.seeds if args.what in ("navigation", "knowledge") else args.lines,
+                             seed=args.seed,
                              history=args.history, overrides=overrides)
     print(bench.format_result(args.what, result))
     print(f"\nwrote {result['_path']}; appended to the accuracy history {result['_history']} "
@@ -353,9 +354,11 @@ def _add_study_and_bench(sub, quiet_help: str) -> None:
     s.set_defaults(func=cmd_navigate)
 
     s = sub.add_parser("bench", help="benchmarks (results printed and written as JSON)")
-    s.add_argument("what", choices=["render", "restore", "matching", "integration", "memory", "robustness",
-                                    "regression", "navigation", "compare"],
-                   help="what to measure (memory: peak RSS of render, restore and report at 4 000, 16 000 and "
+    s.add_argument("what", choices=["render", "restore", "matching", "integration", "knowledge", "memory",
+                                    "robustness", "regression", "navigation", "compare"],
+                   help="what to measure (knowledge: a causal AOCS knowledge's record ends, dephased and advanced, "
+                        "against the attitude through |F|, over 30 draws of six stress attitudes at 2 / 4 / 8 Hz, "
+                        "no rendering; memory: peak RSS of render, restore and report at 4 000, 16 000 and "
                         "50 000 lines, each in its own process; regression: every built-in and stress scenario "
                         "against its own requirement, exit 1 if one fails); compare: the last bench record "
                         "against the previous one with the same settings, exit 1 on a regression")
@@ -366,7 +369,8 @@ def _add_study_and_bench(sub, quiet_help: str) -> None:
     s.add_argument("--history", default="bench/history.jsonl",
                    help="accuracy history every bench appends to, and compare reads (default: %(default)s)")
     s.add_argument("--benchmark", default=None, help="compare: which benchmark's records (default: the last run)")
-    s.add_argument("--seeds", type=int, default=None, help="navigation: Monte Carlo seeds (default: the scenario's)")
+    s.add_argument("--seeds", type=int, default=None,
+                   help="navigation: Monte Carlo seeds (default: the scenario's); knowledge: draws per row (default 30)")
     s.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="robustness / regression: override a key of every scenario, e.g. "
                         "--set restoration.noise_colour_weighting=false (value in TOML syntax; the runs go to their "
