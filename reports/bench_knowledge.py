@@ -79,23 +79,14 @@ def knowledge_end_errors(scenario, *, seed: int, cutoff_hz: float, latency_ms: f
     out = {}
     for axis in ("roll", "pitch"):
         ideal = np.interp(tk, grid, np.fft.irfft(np.fft.rfft(model.evaluate_axis(axis, grid)) * gain, grid.size))
-        v = (dephase_samples(getattr(kn, axis), dt, cutoff_hz=cutoff_hz, order=4, kind="butterworth_causal")
-             if predicted else _reflected_dephasing(getattr(kn, axis), dt, cutoff_hz))
+        v = dephase_samples(getattr(kn, axis), dt, cutoff_hz=cutoff_hz, order=4, kind="butterworth_causal",
+                            predicted_ends=predicted)
         v = advance_samples(v, dt, latency_ms * 1e-3, memory_s=memory)
         e = (v - ideal)[inside]
         e = e - line @ np.linalg.lstsq(line, e, rcond=None)[0]
         low = _gaussian_lowpass(e, dt, LOWPASS_HZ)
         out[axis] = (float(np.sqrt(np.mean(low ** 2))), float(np.sqrt(np.mean(low[-n_end:] ** 2))))
     return out
-
-
-def _reflected_dephasing(values, dt: float, cutoff_hz: float) -> np.ndarray:
-    """:func:`restore.knowledge_dephasing.dephase_samples` with the ends point-reflected only."""
-    from restore import knowledge_dephasing as kd
-
-    return kd._all_passed(values, dt, lambda f: -kd._phase(f, cutoff_hz, 4, "butterworth_causal"),
-                          kd.group_delay_at_zero(cutoff_hz, 4, "butterworth_causal"),
-                          kd.EXTENSION_TIME_CONSTANTS / cutoff_hz, memory_s=None)
 
 
 def bench_knowledge(*, seeds: int = 30, scenarios=SCENARIOS, cutoffs=CUTOFFS_HZ, first_seed: int = 0,

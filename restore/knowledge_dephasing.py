@@ -82,7 +82,7 @@ def group_delay_at_zero(cutoff_hz: float, order: int, kind: str = "butterworth_c
 
 
 def dephase_samples(values, dt: float, *, cutoff_hz: float, order: int,
-                    kind: str = "butterworth_causal") -> np.ndarray:
+                    kind: str = "butterworth_causal", predicted_ends: bool = True) -> np.ndarray:
     """The knowledge samples through the all-pass ``e^{−i arg F}`` of their recorded filter.
 
     Parameters
@@ -94,6 +94,9 @@ def dephase_samples(values, dt: float, *, cutoff_hz: float, order: int,
         Sampling interval [s].
     cutoff_hz, order, kind
         The knowledge's filter as product.nc records it (a kind of :data:`DEPHASABLE_KINDS`).
+    predicted_ends : bool
+        Extend the record by linear prediction before the reflection (the restoration's ends); False: the
+        point reflection alone (what :mod:`reports.bench_knowledge` compares it with).
 
     Returns
     -------
@@ -117,7 +120,7 @@ def dephase_samples(values, dt: float, *, cutoff_hz: float, order: int,
         raise ValueError(f"dt and cutoff_hz must be > 0, got {dt}, {cutoff_hz}")
     return _all_passed(values, dt, lambda f: -_phase(f, cutoff_hz, order, kind),
                        group_delay_at_zero(cutoff_hz, order, kind), EXTENSION_TIME_CONSTANTS / cutoff_hz,
-                       memory_s=prediction_memory_s(cutoff_hz))
+                       memory_s=prediction_memory_s(cutoff_hz) if predicted_ends else None)
 
 
 def prediction_memory_s(cutoff_hz: float) -> float:
