@@ -357,12 +357,14 @@ def knowledge_timing_line(restoration) -> str | None:
     if restoration is None:
         return None
     est = json.loads(restoration.attrs.get("knowledge_latency", "{}") or "{}")
-    if not est or not est.get("taken"):
+    # a restoration written before the shrinkage (thirty-ninth session) says "significant" and took it whole
+    if not est or not est.get("taken", est.get("significant")):
         return None
     lo, hi = est["band_hz"]
+    how = (f"advanced by {est['applied_s'] * 1e3:.1f} ms (the estimate shrunk by its σ)" if "applied_s" in est
+           else "advanced by that")
     return (f"  the AOCS knowledge was {est['delay_s'] * 1e3:.1f} ± {est['sigma_s'] * 1e3:.1f} ms late against the "
-            f"images ({', '.join(est['axes'])} at {lo:.2f}–{hi:.2f} Hz): advanced by {est['applied_s'] * 1e3:.1f} ms "
-            "(the estimate shrunk by its σ) before it was used")
+            f"images ({', '.join(est['axes'])} at {lo:.2f}–{hi:.2f} Hz): {how} before it was used")
 
 
 def knowledge_filter_line_of_run(run, axes) -> str | None:

@@ -102,6 +102,11 @@ def test_the_summary_says_a_latency_taken_out_and_nothing_otherwise():
     weak = LatencyEstimate(delay_s=0.002, sigma_s=0.0021, band_hz=(0.8, 3.44), axes=("pitch", "roll"))
     assert knowledge_timing_line(ds.assign_attrs(knowledge_latency=json.dumps(weak.to_dict()))) is None
     assert knowledge_timing_line(xr.Dataset()) is None and knowledge_timing_line(None) is None
+    # a restoration.nc written before the shrinkage took a "significant" latency whole
+    old = {k: v for k, v in est.to_dict().items() if k not in ("shrinkage", "applied_s", "taken")}
+    line = knowledge_timing_line(ds.assign_attrs(knowledge_latency=json.dumps({**old, "significant": True})))
+    assert line is not None and "advanced by that" in line
+    assert knowledge_timing_line(ds.assign_attrs(knowledge_latency=json.dumps({**old, "significant": False}))) is None
 
 
 def test_a_knowledge_whose_band_holds_only_its_noise_measures_no_latency():
