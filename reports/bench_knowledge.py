@@ -20,6 +20,8 @@ Run ``simsat bench knowledge`` (or ``python -m reports.bench_knowledge``).
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from restore.knowledge_dephasing import advance_samples, dephase_samples, prediction_memory_s
@@ -48,6 +50,24 @@ def _gaussian_lowpass(x: np.ndarray, dt: float, cutoff_hz: float) -> np.ndarray:
     return gaussian_filter1d(x, 1.0 / (2 * np.pi * cutoff_hz) / dt, mode="nearest")
 
 
+@lru_cache(maxsize=4)
+def _draw(scenario: str, seed: int, cutoff_hz: float, latency_ms: float):
+    """One draw's knowledge samples (the scenario's, made causal at ``cutoff_hz`` and ``latency_ms`` late),
+    ``{axis: |F| θ at their times}`` and which of them lie in the record; kept for the second variant of
+    :func:`knowledge_end_errors` on the same draw."""
+    sc = load_scenario(scenario, overrides={"scenario": {"seed": seed}, "attitude": {"knowledge": {
+        "filter": "causal", "delay_ms": latency_ms, "cutoff_hz": cutoff_hz}}})
+    model = sc.attitude_model()
+    kn = model.knowledge_series()
+    tk = np.asarray(kn.time, dtype=np.float64)
+    grid = np.arange(tk[0] - _PAD_S, tk[-1] + _PAD_S, 1.0 / _FS)
+    f = np.fft.rfftfreq(grid.size, 1.0 / _FS)
+    gain = 1.0 / np.sqrt(1.0 + (f / cutoff_hz) ** 8)               # |F| of the 4th-order Butterworth
+    ideal = {a: np.interp(tk, grid, np.fft.irfft(np.fft.rfft(model.evaluate_axis(a, grid)) * gain, grid.size))
+             for a in ("roll", "pitch")}
+    return kn, ideal, (tk >= sc.t0_s) & (tk <= sc.t_end_s)
+
+
 def knowledge_end_errors(scenario, *, seed: int, cutoff_hz: float, latency_ms: float = LATENCY_MS,
                          predicted: bool = True) -> dict:
     """``{axis: (rms, rms_end)}`` [rad]: the dephased and advanced knowledge less ``|F| θ`` below
@@ -63,26 +83,18 @@ def knowledge_end_errors(scenario, *, seed: int, cutoff_hz: float, latency_ms: f
     predicted : bool
         The restoration's ends (linear prediction); False: the point reflection alone.
     """
-    sc = load_scenario(scenario, overrides={"scenario": {"seed": int(seed)}, "attitude": {"knowledge": {
-        "filter": "causal", "delay_ms": float(latency_ms), "cutoff_hz": float(cutoff_hz)}}})
-    model = sc.attitude_model()
-    kn = model.knowledge_series()
+    kn, ideal, inside = _draw(str(scenario), int(seed), float(cutoff_hz), float(latency_ms))
     tk = np.asarray(kn.time, dtype=np.float64)
     dt = float(np.median(np.diff(tk)))
-    grid = np.arange(tk[0] - _PAD_S, tk[-1] + _PAD_S, 1.0 / _FS)
-    f = np.fft.rfftfreq(grid.size, 1.0 / _FS)
-    gain = 1.0 / np.sqrt(1.0 + (f / cutoff_hz) ** 8)               # |F| of the 4th-order Butterworth
-    inside = (tk >= sc.t0_s) & (tk <= sc.t_end_s)
     line = np.vstack([np.ones(np.count_nonzero(inside)), tk[inside]]).T
     memory = prediction_memory_s(cutoff_hz) if predicted else None
     n_end = max(1, int(round(END_S / dt)))
     out = {}
     for axis in ("roll", "pitch"):
-        ideal = np.interp(tk, grid, np.fft.irfft(np.fft.rfft(model.evaluate_axis(axis, grid)) * gain, grid.size))
         v = dephase_samples(getattr(kn, axis), dt, cutoff_hz=cutoff_hz, order=4, kind="butterworth_causal",
                             predicted_ends=predicted)
         v = advance_samples(v, dt, latency_ms * 1e-3, memory_s=memory)
-        e = (v - ideal)[inside]
+        e = (v - ideal[axis])[inside]
         e = e - line @ np.linalg.lstsq(line, e, rcond=None)[0]
         low = _gaussian_lowpass(e, dt, LOWPASS_HZ)
         out[axis] = (float(np.sqrt(np.mean(low ** 2))), float(np.sqrt(np.mean(low[-n_end:] ** 2))))
@@ -101,9 +113,13 @@ def bench_knowledge(*, seeds: int = 30, scenarios=SCENARIOS, cutoffs=CUTOFFS_HZ,
         ifov = sc.instrument.ifov_rad(sc.acquisition.reference_detector)
         for fc in cutoffs:
             row = {"scenario": name, "cutoff_hz": float(fc)}
-            for key, predicted in (("predicted", True), ("reflected", False)):
-                errs = np.array([[knowledge_end_errors(path, seed=s, cutoff_hz=fc, predicted=predicted)[a]
-                                  for a in ("roll", "pitch")] for s in range(first_seed, first_seed + seeds)])
+            draws = {key: [] for key in ("predicted", "reflected")}
+            for s in range(first_seed, first_seed + seeds):    # both variants on a draw, one after the other
+                for key in draws:
+                    e = knowledge_end_errors(path, seed=s, cutoff_hz=fc, predicted=key == "predicted")
+                    draws[key].append([e[a] for a in ("roll", "pitch")])
+            for key, errs in draws.items():
+                errs = np.array(errs)
                 row[key] = {"rms_px": float(np.sqrt(np.mean(errs[..., 0] ** 2)) / ifov),
                             "end_rms_px": float(np.sqrt(np.mean(errs[..., 1] ** 2)) / ifov),
                             "max_px": float(np.max(errs[..., 0]) / ifov)}
