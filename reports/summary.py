@@ -229,6 +229,19 @@ def sigma_if_images_short(sigma_rad: float, check: dict, *, took_share: bool = T
     return float(np.sqrt(max(sigma_rad ** 2 - booked ** 2, 0.0) + excess ** 2))
 
 
+def _sigma_json(variable, key: str) -> dict | None:
+    """The JSON attribute ``key`` of a ``sigma_<axis>`` variable as a dict ({} when absent or no variable);
+    None when it does not parse."""
+    import json
+
+    if variable is None:
+        return {}
+    try:
+        return json.loads(str(variable.attrs.get(key, "{}")) or "{}")
+    except ValueError:
+        return None
+
+
 def knowledge_check_line(restoration, axes, *, took_share: bool = True) -> str | None:
     """The line saying where the restored angle and its smoothed AOCS knowledge disagree beyond both predicted
     errors (the ``knowledge_check`` of ``sigma_<axis>`` in restoration.nc, where its excess passed the limit),
@@ -239,8 +252,6 @@ def knowledge_check_line(restoration, axes, *, took_share: bool = True) -> str |
     the short one, ``√(σ² − booked² + excess²)``, so that a reader without truth sees how optimistic σ may be.
     ``took_share``: whether σ holds that share (the setting ``sigma_knowledge_check``, on by default).
     """
-    import json
-
     if restoration is None or "pixel_ifov_rad" not in restoration.attrs:
         return None
     ifov = float(restoration.attrs["pixel_ifov_rad"])
@@ -248,9 +259,8 @@ def knowledge_check_line(restoration, axes, *, took_share: bool = True) -> str |
     found = []
     for a in axes:
         v = restoration.variables.get(f"sigma_{a}")
-        try:
-            chk = json.loads(str(v.attrs.get("knowledge_check", "{}")) or "{}") if v is not None else {}
-        except ValueError:
+        chk = _sigma_json(v, "knowledge_check")
+        if chk is None:
             continue
         excess = float(chk.get("excess_rms_rad", 0.0) or 0.0)
         sigma = float(v.attrs.get("predicted_detrended_rms_rad", np.nan)) if v is not None else np.nan
@@ -266,6 +276,32 @@ def knowledge_check_line(restoration, axes, *, took_share: bool = True) -> str |
         return None
     return ("  the AOCS knowledge disagrees with the restored angle beyond both predicted errors (σ may be "
             "optimistic): " + "; ".join(found))
+
+
+def conditioned_excess_line(restoration, axes) -> str | None:
+    """The line saying where the images' estimate exceeds what its knowledge-conditioned prior allows (the
+    ``conditioned_excess`` of ``sigma_<axis>`` in restoration.nc, :mod:`restore.conditioned_excess`), or None.
+
+    Such an excess is noise that moves like an attitude in every pair (the scene's band offset), or knowledge
+    error the prior lacks: either way the restored angle there holds more error than σ predicts.
+    """
+    if restoration is None or "pixel_ifov_rad" not in restoration.attrs:
+        return None
+    ifov = float(restoration.attrs["pixel_ifov_rad"])
+    found = []
+    for a in axes:
+        ex = _sigma_json(restoration.variables.get(f"sigma_{a}"), "conditioned_excess")
+        if not ex or not ex.get("excess_hz"):
+            continue
+        hz = [float(f) for f in ex["excess_hz"]]
+        found.append(f"{a} at {min(hz):.1f}–{max(hz):.1f} Hz (up to {float(ex['max_ratio']):.1f} × what the "
+                     f"prior allows, {float(ex['excess_rms_rad']) / ifov:.4f} px beyond it)")
+    if not found:
+        return None
+    return ("  the images' estimate exceeds what the AOCS knowledge lets its prior hold (σ may be optimistic there "
+            "and above the knowledge's cut-off): " + "; ".join(found)
+            + ": noise that moves like an attitude in every pair (the scene's band offset), or knowledge error "
+              "its model lacks")
 
 
 def scene_offset_line_of_run(run, axes) -> str | None:
@@ -490,6 +526,9 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
                                         took_share=bool(run.settings.get("sigma_knowledge_check", True)))
     if disagreement:
         lines.append(disagreement)
+    excess = conditioned_excess_line(run.restoration, axes_r)
+    if excess:
+        lines.append(excess)
     verdict = hd.get("verdict") or ""
     if hd.get("passed") is True:
         lines.append(f"requirement: {verdict}")

@@ -262,7 +262,11 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
                                            else "reported",
                                            "knowledge_check": json.dumps(res.knowledge_checks[a].as_dict()
                                                                          if a in res.knowledge_checks else {},
-                                                                         sort_keys=True)})
+                                                                         sort_keys=True),
+                                           "conditioned_excess": json.dumps(
+                                               res.conditioned_excess[a].as_dict()
+                                               if a in getattr(res, "conditioned_excess", {}) else {},
+                                               sort_keys=True)})
         data[f"flagged_{a}"] = ("time", np.asarray(res.flagged.get(a, np.zeros(sg.size, bool)), dtype=np.int8), {
             "long_name": f"1: {a} not restored, predicted sigma above restoration.max_sigma_px"})
     for a, fu in getattr(res, "knowledge_fusion", {}).items():
@@ -276,15 +280,28 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
 
 
 # --------------------------------------------------------------------------- reader
-def _knowledge_checks_from(ds) -> dict:
-    """``{axis: KnowledgeCheck}`` recorded on the ``sigma_<axis>`` variables (none in older files)."""
+def _sigma_records_from(ds, key: str, cls) -> dict:
+    """``{axis: cls.from_dict(...)}`` of the JSON attribute ``key`` recorded on the ``sigma_<axis>`` variables
+    (none in older files)."""
     out = {}
     for a in AXES:
         if f"sigma_{a}" in ds.variables:
-            d = json.loads(ds[f"sigma_{a}"].attrs.get("knowledge_check", "{}") or "{}")
+            d = json.loads(ds[f"sigma_{a}"].attrs.get(key, "{}") or "{}")
             if d:
-                out[a] = KnowledgeCheck.from_dict(d)
+                out[a] = cls.from_dict(d)
     return out
+
+
+def _knowledge_checks_from(ds) -> dict:
+    """``{axis: KnowledgeCheck}`` recorded on the ``sigma_<axis>`` variables (none in older files)."""
+    return _sigma_records_from(ds, "knowledge_check", KnowledgeCheck)
+
+
+def _conditioned_excess_from(ds) -> dict:
+    """``{axis: ConditionedExcess}`` recorded on the ``sigma_<axis>`` variables (none in older files)."""
+    from .conditioned_excess import ConditionedExcess
+
+    return _sigma_records_from(ds, "conditioned_excess", ConditionedExcess)
 
 
 def _knowledge_fusion_from(ds) -> dict:
@@ -401,7 +418,8 @@ def result_from_dataset(ds, path: str | Path | None = None) -> RestorationResult
                              if f"knowledge_smoothing_{a}" in ds.variables},
         knowledge_dephasing={a: _values(ds, f"knowledge_dephasing_{a}") for a in AXES
                              if f"knowledge_dephasing_{a}" in ds.variables},
-        knowledge_checks=_knowledge_checks_from(ds), knowledge_fusion=_knowledge_fusion_from(ds))
+        knowledge_checks=_knowledge_checks_from(ds), knowledge_fusion=_knowledge_fusion_from(ds),
+        conditioned_excess=_conditioned_excess_from(ds))
 
 
 def read_restoration(path: str | Path, *, product_time: np.ndarray | None = None):

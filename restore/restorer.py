@@ -185,7 +185,7 @@ class Restorer:
                                  yaw_roll_coupling=stages.yaw_coupling(pairs, "roll"),
                                  knowledge_smoothing=smoothing, knowledge_dephasing=dephasing, knowledge_checks=checks,
                                  knowledge_latency=self.latency.to_dict() if self.latency is not None else {},
-                                 knowledge_fusion=fusions)
+                                 knowledge_fusion=fusions, conditioned_excess=stages.conditioned_excesses(records, product))
 
     def _settings_for(self, product: Product) -> RestorationSettings:
         """The settings the product decides: the "auto" high-pass (from the AOCS knowledge's cut-off) and

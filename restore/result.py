@@ -161,6 +161,9 @@ class RestorationResult:
     #: per axis the fusion could be tried on: the knowledge's band taken where the estimate's proved astray
     #: (:class:`restore.knowledge_fusion.KnowledgeFusion`); the fusion's error is in ``sigma``
     knowledge_fusion: dict = field(default_factory=dict)
+    #: per axis whose prior is conditioned on the knowledge: the estimate against what that prior allows
+    #: (:class:`restore.conditioned_excess.ConditionedExcess`); a diagnostic, not in ``sigma``
+    conditioned_excess: dict = field(default_factory=dict)
 
     def yaw_coupling(self, axis: str) -> float:
         """The yaw seen as ``axis`` per radian of missed yaw (0 for yaw or an axis without one)."""

@@ -52,7 +52,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_error_prior", "knowledge_filter_errors", "knowledge_latency_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_latency", "advanced_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_error_prior", "conditioned_excesses", "knowledge_filter_errors", "knowledge_latency_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_latency", "advanced_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -1114,6 +1114,23 @@ def raise_by_knowledge_check(sigma: dict, records: dict, product: Product, setti
                              # judging the σ before it
                              model_sigma=ps.sigma if ps.model_sigma is None else ps.model_sigma)
     return out, checks
+
+
+def conditioned_excesses(records: dict, product: Product) -> dict:
+    """``{axis: ConditionedExcess}`` of each record whose prior is conditioned on the AOCS knowledge
+    (:func:`restore.conditioned_excess.record_conditioned_excess`); empty when the product does not record
+    the knowledge's cut-off."""
+    from .conditioned_excess import record_conditioned_excess
+
+    cutoff = product.ds.attrs.get("knowledge_cutoff_hz")
+    if cutoff is None:
+        return {}
+    out = {}
+    for a, rec in sorted(records.items()):
+        ex = record_conditioned_excess(rec, float(cutoff))
+        if ex is not None:
+            out[a] = ex
+    return out
 
 
 def knowledge_filter_errors(records: dict, product: Product) -> dict:

@@ -1,0 +1,141 @@
+"""The estimate against what its knowledge-conditioned prior allows (restore.conditioned_excess)."""
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import xarray as xr
+
+from restore.conditioned_excess import (ConditionedExcess, conditioned_excess, fused_noise_per_bin,
+                                        lines_above_removed, record_conditioned_excess, wiener_output_power)
+
+N = 8000
+DT = 4e-4
+TAUS = (0.0074, 0.0148, 0.0222)
+IFOV = 4e-6
+NOISE = np.array([0.07, 0.09, 0.06]) * IFOV
+HP, CUTOFF = 0.4, 2.0
+#: the conditioned prior: a flat two-sided PSD, ≈ 0.01 px per 0.3125 Hz bin
+PRIOR_PSD = (0.01 * IFOV) ** 2 / (2 * 1.0 / (N * DT))
+
+
+def _series(per_bin, rng):
+    """A stationary series whose one-sided power per bin of rfftfreq(N, DT) is ``per_bin`` (summing to its
+    mean square)."""
+    z = np.sqrt(np.asarray(per_bin) * N * N / 4.0) * (rng.standard_normal(per_bin.size)
+                                                     + 1j * rng.standard_normal(per_bin.size))
+    z[0] = 0.0
+    return np.fft.irfft(z, N)
+
+
+def _expected():
+    f = np.fft.rfftfreq(N, DT)
+    prior = np.full(f.size, PRIOR_PSD) * 2 * (f[1] - f[0])
+    return f, wiener_output_power(prior, fused_noise_per_bin(f, NOISE, TAUS, DT, N))
+
+
+def _excess(x):
+    f = np.fft.rfftfreq(N, DT)
+    return conditioned_excess(x, f, np.full(f.size, PRIOR_PSD), NOISE, TAUS, DT, highpass_hz=HP, cutoff_hz=CUTOFF)
+
+
+def test_fused_noise_is_the_inverse_of_the_pairs_information_and_infinite_where_all_are_blind():
+    f = np.array([0.0, 1.0, 1.0 / 0.0074])
+    got = fused_noise_per_bin(f, NOISE[:1], TAUS[:1], DT, N)
+    g2 = (2 * np.sin(np.pi * 1.0 * TAUS[0])) ** 2
+    assert np.isinf(got[0]) and got[2] > 1e6 * got[1]
+    np.testing.assert_allclose(got[1], 2.0 / (N * DT) * NOISE[0] ** 2 * DT / g2)
+
+
+def test_an_estimate_as_the_wiener_filter_gives_it_shows_no_excess():
+    """Drawn with exactly the power a Wiener estimate has under the model, S²/(S+N), the estimate stays within
+    the test: over eight records the largest ratio is near 1 and few records flag a bin (a smoothed bin
+    exceeds 2.5 × its mean in about 2 % of cases)."""
+    f, expected = _expected()
+    ratios, flagged = [], 0
+    for seed in range(8):
+        ex = _excess(_series(expected, np.random.default_rng(seed)))
+        assert ex is not None and ex.band_hz[0] >= HP and ex.band_hz[1] <= 0.9 * CUTOFF
+        ratios.append(ex.max_ratio)
+        flagged += bool(ex.excess_hz)
+    assert np.median(ratios) < 1.8
+    assert flagged <= 2
+
+
+def test_power_beyond_what_the_prior_allows_is_found_where_it_is_and_measured():
+    """Ten times the Wiener output's power in the bins near 1.25 Hz: those bins are flagged, the ratio is
+    about ten and the excess RMS is the added power's."""
+    f, expected = _expected()
+    rng = np.random.default_rng(3)
+    extra = np.where(np.abs(f - 1.25) < 0.2, 9.0 * expected, 0.0)
+    ex = _excess(_series(expected, rng) + _series(extra, np.random.default_rng(4)))
+    assert ex.excess_hz and all(abs(h - 1.25) < 0.7 for h in ex.excess_hz)
+    assert 4.0 < ex.max_ratio < 25.0
+    added = np.sqrt(np.sum(extra))
+    assert 0.5 * added < ex.excess_rms_rad < 2.0 * added
+
+
+def test_a_strong_line_above_the_band_is_fitted_out_not_read_as_excess():
+    """A line 3000 × the band's power two bins above its top leaks through the taper's sidelobes into it;
+    fitted out first, it leaves no excess and the band holds the line-free series' power (with the line, more than
+    half again as much)."""
+    f, expected = _expected()
+    rng = np.random.default_rng(5)
+    t = np.arange(N) * DT
+    line = np.sqrt(2 * 3000 * expected[5]) * np.sin(2 * np.pi * 2.23 * t + 0.3)
+    x = _series(expected, rng) + line
+    ex = _excess(x)
+    assert not ex.excess_hz
+    band = np.flatnonzero((f >= HP) & (f <= 0.9 * CUTOFF))
+    kept = lines_above_removed(x, np.ones(N, bool), int(band[-1]), max_lines=0, band_bins=band)
+    removed = lines_above_removed(x, np.ones(N, bool), int(band[-1]), band_bins=band)
+    assert np.std(kept - x) == 0.0
+    from restore.knowledge_check import tapered_power
+
+    ok = np.ones(N, bool)
+    at = int(np.argmin(np.abs(f - 2.23)))
+    assert tapered_power(removed, ok)[at] < 0.01 * tapered_power(x, ok)[at]
+    # the band's power is the line-free series', not the line's sidelobes
+    np.testing.assert_allclose(tapered_power(removed, ok)[band].sum(), tapered_power(x - line, ok)[band].sum(),
+                               rtol=0.2)
+    assert tapered_power(x, ok)[band].sum() > 1.5 * tapered_power(x - line, ok)[band].sum()
+
+
+def test_only_a_record_conditioned_on_the_knowledge_is_read():
+    f = np.fft.rfftfreq(N, DT)
+    spec = SimpleNamespace(freq=f, psd=np.full(f.size, PRIOR_PSD), noise_std=NOISE)
+    rec = SimpleNamespace(increment=np.zeros(N), spectrum=spec, taus=TAUS, line_period_s=DT, highpass_hz=HP,
+                          knowledge_conditioned=False)
+    assert record_conditioned_excess(rec, CUTOFF) is None
+    rec.knowledge_conditioned = True
+    assert record_conditioned_excess(rec, None) is None
+    assert isinstance(record_conditioned_excess(rec, CUTOFF), ConditionedExcess)
+
+
+def test_too_short_a_band_or_record_gives_none():
+    f = np.fft.rfftfreq(N, DT)
+    assert conditioned_excess(np.zeros(N), f, np.full(f.size, PRIOR_PSD), NOISE, TAUS, DT, highpass_hz=1.7,
+                              cutoff_hz=CUTOFF) is None
+    assert conditioned_excess(np.full(N, np.nan), f, np.full(f.size, PRIOR_PSD), NOISE, TAUS, DT,
+                              highpass_hz=HP, cutoff_hz=CUTOFF) is None
+
+
+def test_round_trip_and_the_summary_line():
+    from reports.summary import conditioned_excess_line
+
+    ex = ConditionedExcess(band_hz=(0.625, 1.75), excess_hz=[0.625, 1.25], max_ratio=5.1, excess_rms_rad=2e-7)
+    assert ConditionedExcess.from_dict(json.loads(json.dumps(ex.as_dict()))) == ex
+    ds = xr.Dataset({"sigma_pitch": ("time", np.zeros(3), {"conditioned_excess": json.dumps(ex.as_dict())}),
+                     "sigma_roll": ("time", np.zeros(3), {"conditioned_excess": "{}"})},
+                    attrs={"pixel_ifov_rad": IFOV})
+    line = conditioned_excess_line(ds, ["roll", "pitch"])
+    assert line is not None and "pitch at 0.6–1.2 Hz" in line and "5.1 ×" in line and "0.0500 px" in line
+    assert "roll at" not in line
+    assert conditioned_excess_line(ds, ["roll"]) is None
+
+
+def test_an_unreadable_record_of_it_is_skipped():
+    from reports.summary import conditioned_excess_line
+
+    ds = xr.Dataset({"sigma_pitch": ("time", np.zeros(3), {"conditioned_excess": "not json"})},
+                    attrs={"pixel_ifov_rad": IFOV})
+    assert conditioned_excess_line(ds, ["pitch"]) is None
