@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
+from .integration.transfer import fused_snr
 from .knowledge_check import _fitted_line, tapered_power
 
 __all__ = ["ConditionedExcess", "lines_above_removed", "wiener_output_power", "conditioned_excess",
@@ -131,9 +132,9 @@ def fused_noise_per_bin(freq, noise_std, taus, dt: float, n: int) -> np.ndarray:
     the mean square: ``2 Δf / Σ_j |G_j(f)|² / (σ_j² Δt)`` (infinite where every pair is blind)."""
     f = np.asarray(freq, dtype=np.float64)
     sd = np.asarray(noise_std, dtype=np.float64)
-    tau = np.asarray(taus, dtype=np.float64)
-    g2 = (2.0 * np.sin(np.pi * f[None, :] * tau[:, None])) ** 2
-    info = np.sum(np.where(sd[:, None] > 0, g2 / np.maximum(sd[:, None] ** 2 * dt, 1e-300), 0.0), axis=0)
+    known = sd > 0                                      # a pair without a noise level brings no information
+    info = fused_snr(f, np.ones_like(f), sd[known], np.asarray(taus, dtype=np.float64)[known], dt) \
+        if known.any() else np.zeros_like(f)
     with np.errstate(divide="ignore"):
         return np.where(info > 0, 2.0 / (n * dt) / info, np.inf)
 
