@@ -168,6 +168,13 @@ MEANING = {
     "interpolation, counted only where at least ½), so where the attitude is quiet and the knowledge noisy the "
     "images' noise no longer passes; then predict σ again. On by default; a product that does not record its "
     "knowledge's filter and noise, or a method with no spectral prior, is not conditioned",
+    "restoration.excess_shrink": "where an axis's prior is conditioned on the knowledge, test its estimate's "
+    "power per bin between the high-pass and 0.9 × the knowledge's cut-off (strong lines above fitted out) "
+    "against what a Wiener output of that prior can hold, the prior allowed 10 % of the attitude for the "
+    "knowledge's model error (family-wise 5 % false alarm over the band); where it fails, shrink each bin above "
+    "its expectation by the Wiener gain with the excess counted as noise and book that estimate's error on σ "
+    "(restore.conditioned_excess; restoration.nc conditioned_excess on sigma_<axis>). Off: the test is only "
+    "reported",
     "restoration.rematch": "coarse to fine: passes matching again in band B resampled into band A's geometry with "
                            "the estimate so far; \"auto\": one pass when the estimate moves by more than 0.3 px "
                            "per line (RMS: large amplitude), else none, and a second when that pass still "

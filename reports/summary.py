@@ -288,20 +288,24 @@ def conditioned_excess_line(restoration, axes) -> str | None:
     if restoration is None or "pixel_ifov_rad" not in restoration.attrs:
         return None
     ifov = float(restoration.attrs["pixel_ifov_rad"])
-    found = []
+    found, shrunk = [], False
     for a in axes:
         ex = _sigma_json(restoration.variables.get(f"sigma_{a}"), "conditioned_excess")
         if not ex or not ex.get("excess_hz"):
             continue
         hz = [float(f) for f in ex["excess_hz"]]
-        found.append(f"{a} at {min(hz):.1f}–{max(hz):.1f} Hz (up to {float(ex['max_ratio']):.1f} × what the "
-                     f"prior allows, {float(ex['excess_rms_rad']) / ifov:.4f} px beyond it)")
+        text = (f"{a} at {min(hz):.1f}–{max(hz):.1f} Hz (up to {float(ex['max_ratio']):.1f} × what the "
+                f"prior allows, {float(ex['excess_rms_rad']) / ifov:.4f} px beyond it")
+        if ex.get("shrink_error_rad") is not None:
+            shrunk = True
+            text += f"; shrunk to a Wiener estimate there, σ holds its {float(ex['shrink_error_rad']) / ifov:.4f} px"
+        found.append(text + ")")
     if not found:
         return None
-    return ("  the images' estimate exceeds what the AOCS knowledge lets its prior hold (σ may be optimistic there "
-            "and above the knowledge's cut-off): " + "; ".join(found)
+    return ("  the images' estimate exceeds what the AOCS knowledge lets its prior hold: " + "; ".join(found)
             + ": noise that moves like an attitude in every pair (the scene's band offset), or knowledge error "
-              "its model lacks")
+              "its model lacks; " + ("σ may be optimistic above the knowledge's cut-off" if shrunk
+                                     else "σ may be optimistic there and above the knowledge's cut-off"))
 
 
 def scene_offset_line_of_run(run, axes) -> str | None:

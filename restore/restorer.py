@@ -102,6 +102,7 @@ class Restorer:
             corrected_attrs: dict | None = None) -> RestorationResult:
         """Restore ``product``.
 
+        Long: the pipeline's stages in order, one call each, so that a reader sees the whole chain in one place.
         With ``corrected_path``, the corrected images are written there block
         by block (memory bounded by one band) and ``result.corrected`` is that
         file opened lazily; otherwise they are kept in memory.
@@ -134,6 +135,7 @@ class Restorer:
                                                                 bar)
             records, estimate, sigma = self.condition_on_knowledge(product, knowledge, records, estimate, sigma,
                                                                     timings, bar)
+            records, estimate, excesses = self.shrink_excess(product, records, estimate, bar)
             s = self.settings
             sigma = self.raise_by_local_error(sigma, records, pairs, product, timings, bar)
             smoothings = stages.knowledge_smoothings(product, s, s.axes)
@@ -142,6 +144,7 @@ class Restorer:
                 sigma, records, product, s, {a: knowledge[a] + estimate[a] + smoothing.get(a, 0.0) for a in AXES},
                 smoothings)
             sigma = stages.raise_by_knowledge_filter(sigma, records, product, self.latency)
+            sigma = stages.raise_by_excess_shrink(sigma, excesses)
             estimate, sigma, fusions = stages.fuse_knowledge_band(estimate, sigma, records, product, s)
             flag_limits: dict = {}
             estimate, flagged = stages.flag_uncertain(estimate, sigma, s.max_sigma_px, product.pixel_ifov_rad,
@@ -185,7 +188,7 @@ class Restorer:
                                  yaw_roll_coupling=stages.yaw_coupling(pairs, "roll"),
                                  knowledge_smoothing=smoothing, knowledge_dephasing=dephasing, knowledge_checks=checks,
                                  knowledge_latency=self.latency.to_dict() if self.latency is not None else {},
-                                 knowledge_fusion=fusions, conditioned_excess=stages.conditioned_excesses(records, product))
+                                 knowledge_fusion=fusions, conditioned_excess=excesses)
 
     def _settings_for(self, product: Product) -> RestorationSettings:
         """The settings the product decides: the "auto" high-pass (from the AOCS knowledge's cut-off) and
@@ -406,6 +409,23 @@ class Restorer:
             sigma = {**sigma, **stages.predicted_sigma(done, product, s)}
         timings["knowledge_conditioning_s"] = _time.perf_counter() - t
         return records, estimate, sigma
+
+    def shrink_excess(self, product: Product, records: dict, estimate: dict, bar) -> tuple:
+        """With ``excess_shrink``: where an axis's estimate holds more, in the band its prior is conditioned on the
+        AOCS knowledge, than a Wiener output can, shrink it there (:func:`stages.shrunk_excesses`). Returns
+        (records, estimate, ``{axis: ConditionedExcess}``): the excess found on every conditioned axis, its
+        ``shrink_error_rad`` set where shrunk (what σ must hold); without the shrink, the excess as a diagnostic
+        (:func:`stages.conditioned_excesses`)."""
+        if not self.settings.excess_shrink:
+            return records, estimate, stages.conditioned_excesses(records, product)
+        shrinks = stages.shrunk_excesses(records, product, self.settings)
+        done = {a: replace(records[a], increment=sh.increment) for a, sh in shrinks.items() if sh.shrunk}
+        if done:
+            bar.note("shrinking the estimate where it exceeds what its knowledge-conditioned prior allows: "
+                     + ", ".join(sorted(done)))
+            records, estimate = dict(records), dict(estimate)
+            _take_records(records, estimate, done)
+        return records, estimate, {a: sh.excess for a, sh in shrinks.items()}
 
     def lower_highpass(self, product: Product, pairs: list, knowledge: dict, records: dict, estimate: dict,
                        sigma: dict, timings: dict, bar) -> tuple:

@@ -56,7 +56,9 @@ class IntegrationRecord:
     """The last integration of one axis, as :func:`restore.axis_integration.integrate_axis` ran it.
 
     Arrays are over (pair, line) for the pairs of ``pairs`` (the pairs the
-    last iteration used). ``increment`` is what that integration returned,
+    last iteration used). ``increment`` is what that integration returned
+    (shrunk where it held more than its knowledge-conditioned prior allows,
+    :mod:`restore.conditioned_excess`, which :meth:`rerun` does not do),
     ``previous`` the estimate it was added to (zero with one iteration): the
     correction is ``previous + increment`` with the mean removed.
     """
@@ -81,6 +83,10 @@ class IntegrationRecord:
     #: the prior is the one given the AOCS knowledge and ``previous`` its conditional mean
     #: (:mod:`restore.knowledge_conditioning`): the draws take the attitude error from that prior as it is
     knowledge_conditioned: bool = False
+    #: where the prior is conditioned: the attitude's PSD the conditioning read, ``S_θ`` on ``spectrum.freq`` where
+    #: the knowledge's response counts (0 elsewhere) [rad²/Hz, two-sided]; what the knowledge's model error scales
+    #: with (:data:`restore.conditioned_excess.KNOWLEDGE_MODEL_ERROR`). Not written to restoration.nc
+    conditioned_attitude_psd: np.ndarray | None = None
 
     def rerun(self, diffs=None, *, frozen: bool = True, lags=None, first_stage_gcv: bool = True) -> np.ndarray:
         """Integrate other differentials (true ones, noisy ones) through this axis's integration.

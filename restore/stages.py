@@ -52,7 +52,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_error_prior", "conditioned_excesses", "knowledge_filter_errors", "knowledge_latency_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_latency", "advanced_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_error_prior", "conditioned_excesses", "shrunk_excesses", "raised_uniformly", "raise_by_excess_shrink", "knowledge_filter_errors", "knowledge_latency_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_latency", "advanced_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -1042,7 +1042,8 @@ def knowledge_conditioned(record: IntegrationRecord, sigma, product: Product, kn
         mu = highpass_nan(mu, dt=dt, cutoff_hz=record.highpass_hz)
     diffs = np.asarray(record.diffs) - simulated_differentials(mu, record.taus, lags, np.isfinite(record.diffs), dt)
     new = replace(record, diffs=diffs, spectrum=replace(record.spectrum, psd=cond.variance), previous=mu[:n],
-                  knowledge_conditioned=True)
+                  knowledge_conditioned=True,
+                  conditioned_attitude_psd=np.where(np.abs(cond.mean_filter) > 0, cond.psd_theta, 0.0))
     return replace(new, increment=new.rerun())   # the method's frozen options, with the conditional prior
 
 
@@ -1180,10 +1181,17 @@ def raise_by_knowledge_filter(sigma: dict, records: dict, product: Product, late
     the restored angle's error in that band). With ``latency`` (:class:`restore.knowledge_timing.LatencyEstimate`)
     also what is still unknown of the knowledge's latency (:func:`knowledge_latency_errors`). Like the knowledge
     check's raise, the same on every line (``model_sigma`` keeps the σ before it). Returns a new dict."""
-    out = dict(sigma)
     late = knowledge_latency_errors(records, product, latency)
     errors = knowledge_filter_errors(records, product)
-    for a, e in {a: float(np.hypot(errors.get(a, 0.0), late.get(a, 0.0))) for a in set(errors) | set(late)}.items():
+    return raised_uniformly(sigma, {a: float(np.hypot(errors.get(a, 0.0), late.get(a, 0.0)))
+                                    for a in set(errors) | set(late)})
+
+
+def raised_uniformly(sigma: dict, errors: dict) -> dict:
+    """Each axis's σ raised in quadrature by ``errors[axis]`` [rad], the same on every line (``model_sigma``
+    keeps the σ before the first such raise). Returns a new dict."""
+    out = dict(sigma)
+    for a, e in errors.items():
         ps = out.get(a)
         if ps is None or not e > 0:
             continue
@@ -1194,6 +1202,35 @@ def raise_by_knowledge_filter(sigma: dict, records: dict, product: Product, late
         out[a] = replace(ps, sigma=up(ps.sigma), detrended_sigma=up(ps.detrended_sigma),
                          detrended_rms=float(np.sqrt(ps.detrended_rms ** 2 + b)),
                          model_sigma=ps.sigma if ps.model_sigma is None else ps.model_sigma)
+    return out
+
+
+def raise_by_excess_shrink(sigma: dict, excesses: dict) -> dict:
+    """Each axis's σ raised in quadrature by the error its excess shrink still leaves
+    (``ConditionedExcess.shrink_error_rad``, :func:`shrunk_excesses`), where one ran; a new dict."""
+    return raised_uniformly(sigma, {a: ex.shrink_error_rad for a, ex in excesses.items()
+                                    if ex.shrink_error_rad is not None})
+
+
+def shrunk_excesses(records: dict, product: Product, settings: RestorationSettings) -> dict:
+    """``{axis: ExcessShrink}`` of each record whose prior is conditioned on the AOCS knowledge
+    (:func:`restore.conditioned_excess.shrunk_excess`): its estimate with the band's excess over the Wiener output
+    shrunk. Empty with ``excess_shrink`` off or when the product does not record the knowledge's cut-off."""
+    from .conditioned_excess import shrunk_excess
+
+    cutoff = product.ds.attrs.get("knowledge_cutoff_hz")
+    if not settings.excess_shrink or cutoff is None:
+        return {}
+    out = {}
+    for a, rec in sorted(records.items()):
+        if not rec.knowledge_conditioned or rec.spectrum is None:
+            continue
+        sp = rec.spectrum
+        sh = shrunk_excess(rec.increment, sp.freq, sp.psd, sp.noise_std, rec.taus, float(rec.line_period_s),
+                           highpass_hz=float(rec.highpass_hz), cutoff_hz=float(cutoff),
+                           model_psd=rec.conditioned_attitude_psd)
+        if sh is not None:
+            out[a] = sh
     return out
 
 

@@ -139,3 +139,104 @@ def test_an_unreadable_record_of_it_is_skipped():
     ds = xr.Dataset({"sigma_pitch": ("time", np.zeros(3), {"conditioned_excess": "not json"})},
                     attrs={"pixel_ifov_rad": IFOV})
     assert conditioned_excess_line(ds, ["pitch"]) is None
+
+
+def _wiener_case(offset_factor, seed, *, model=None, theta=None):
+    """An attitude ``e`` of flat PSD (the prior), white fused noise and an attitude-like offset ``offset_factor``
+    × the prior and noise together in the bins at 2–3 Hz (clear of the quadratic trend the periodogram takes out),
+    through the Wiener filter the MAP is (per bin, circular), read under a 4 Hz knowledge. Returns
+    (f, truth, estimate, shrink)."""
+    from restore.conditioned_excess import shrunk_excess
+
+    f = np.fft.rfftfreq(N, DT)
+    prior = np.full(f.size, PRIOR_PSD) * 2 * (f[1] - f[0])
+    noise = fused_noise_per_bin(f, NOISE, TAUS, DT, N)
+    rng = np.random.default_rng(seed)
+    truth = _series(prior if theta is None else theta, rng)
+    with np.errstate(invalid="ignore"):
+        offset = _series(np.where((f >= 2.0) & (f <= 3.0), offset_factor * (prior + noise), 0.0), rng)
+    measured = truth + offset + _series(np.where(np.isfinite(noise), noise, 0.0), rng)
+    gain = np.where(np.isfinite(noise), prior / (prior + noise), 0.0)
+    estimate = np.fft.irfft(np.fft.rfft(measured) * gain, N)
+    sh = shrunk_excess(estimate, f, np.full(f.size, PRIOR_PSD), NOISE, TAUS, DT, highpass_hz=HP, cutoff_hz=2 * CUTOFF,
+                       model_psd=model)
+    return f, truth, estimate, sh
+
+
+def _band_error(f, x, truth):
+    from restore.knowledge_check import tapered_power
+
+    band = (f >= HP) & (f <= 0.9 * 2 * CUTOFF)
+    return float(np.sum(tapered_power(x - truth, np.ones(N, bool))[band]))
+
+
+def test_an_offset_in_the_band_is_shrunk_to_the_wiener_estimate_and_its_error_booked():
+    """An attitude-like offset of 10 × the prior and noise in a few bins: the MAP passes it at its gain; the shrunk estimate's
+    error in the band is near the minimum-variance one (offset counted as noise), well under the MAP's, and the
+    error booked for σ is what the shrunk estimate's error adds to the Wiener error without the offset."""
+    f = np.fft.rfftfreq(N, DT)
+    prior = PRIOR_PSD * 2 * (f[1] - f[0])
+    band = (f >= HP) & (f <= 0.9 * 2 * CUTOFF)
+    noise = fused_noise_per_bin(f, NOISE, TAUS, DT, N)[band]
+    hit = (f[band] >= 2.0) & (f[band] <= 3.0)
+    o = 10.0 * (prior + noise)
+    optimal = np.sum(np.where(hit, prior * (o + noise) / (prior + o + noise), prior * noise / (prior + noise)))
+    draws = np.sum(prior * noise / (prior + noise))
+    before, after, booked, gains, fired = [], [], [], [], 0
+    for seed in range(12):
+        _, truth, est, sh = _wiener_case(10.0, seed)
+        fired += sh.shrunk
+        gains.append(np.mean(sh.gain[(f >= 2.0) & (f <= 3.0)]))
+        before.append(_band_error(f, est, truth))
+        after.append(_band_error(f, sh.increment, truth))
+        booked.append(sh.excess.shrink_error_rad ** 2)
+    assert fired >= 10 and np.mean(gains) < 0.5
+    assert np.mean(after) < 0.35 * np.mean(before)
+    assert np.mean(after) < 2.0 * optimal          # the plug-in gain reads a noisy power: not the oracle's
+    np.testing.assert_allclose(np.mean(booked), np.mean(after) - draws, rtol=0.5)
+
+
+def test_without_an_offset_the_band_test_rarely_fires_and_costs_little():
+    """The band's test is family-wise at EXCESS_FALSE_ALARM (5 %): over 30 model-true records at most 3 are
+    shrunk, and the band's mean error grows by under a third (a false excess shrinks the attitude's own
+    fluctuation: the one record of these that fires loses most of three bins)."""
+    f = np.fft.rfftfreq(N, DT)
+    before, after, fired = [], [], 0
+    for seed in range(30):
+        _, truth, est, sh = _wiener_case(0.0, 10 + seed)
+        before.append(_band_error(f, est, truth))
+        after.append(_band_error(f, sh.increment, truth))
+        fired += sh.shrunk
+    assert fired <= 3
+    assert np.mean(after) < 1.35 * np.mean(before)
+
+
+def test_an_attitude_within_the_knowledge_model_error_is_not_shrunk():
+    """The attitude holds 10 × the prior at 2–3 Hz (a strong line's share the knowledge's model leaves, within
+    KNOWLEDGE_MODEL_ERROR of the attitude the conditioning read): with that attitude's PSD given, nothing is
+    shrunk; without it, the same estimate is."""
+    from restore.conditioned_excess import KNOWLEDGE_MODEL_ERROR
+
+    f = np.fft.rfftfreq(N, DT)
+    prior = np.full(f.size, PRIOR_PSD) * 2 * (f[1] - f[0])
+    theta = np.where((f >= 2.0) & (f <= 3.0), 10.0 * prior, prior)
+    # the conditioning's attitude PSD is smoothed over 2 Hz: broader than the line's bins
+    strong = np.where((f >= 1.5) & (f <= 3.5), 10.0 * PRIOR_PSD / KNOWLEDGE_MODEL_ERROR ** 2, 0.0)
+    with_model = [_wiener_case(0.0, 40 + seed, model=strong, theta=theta)[3] for seed in range(8)]
+    without = [_wiener_case(0.0, 40 + seed, theta=theta)[3] for seed in range(8)]
+    assert sum(sh.shrunk for sh in with_model) <= 1
+    assert all(sh.excess.shrink_error_rad == 0.0 for sh in with_model if not sh.shrunk)
+    assert sum(sh.shrunk for sh in without) >= 6
+
+
+def test_the_summary_line_says_where_the_estimate_was_shrunk():
+    from reports.summary import conditioned_excess_line
+
+    ex = ConditionedExcess(band_hz=(0.625, 1.75), excess_hz=[0.625], max_ratio=5.1, excess_rms_rad=2e-7,
+                           shrink_error_rad=4e-8)
+    assert ConditionedExcess.from_dict(json.loads(json.dumps(ex.as_dict()))) == ex
+    ds = xr.Dataset({"sigma_pitch": ("time", np.zeros(3), {"conditioned_excess": json.dumps(ex.as_dict())})},
+                    attrs={"pixel_ifov_rad": IFOV})
+    line = conditioned_excess_line(ds, ["pitch"])
+    assert "shrunk to a Wiener estimate there, σ holds its 0.0100 px" in line
+    assert "optimistic there" not in line

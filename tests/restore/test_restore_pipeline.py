@@ -912,3 +912,53 @@ def test_lines_that_took_the_knowledge_s_band_are_counted_and_said_in_the_report
     _uncertainty_section(pg, D.load_run(run), {"ifov_rad": float(ds.attrs["pixel_ifov_rad"])})
     text = "\n".join(pg.parts)
     assert "Knowledge fusion: roll 40 lines" in text and "pitch 0 lines" not in text
+
+
+def test_an_estimate_over_its_conditioned_prior_is_shrunk_and_its_error_booked(tiny_restored):
+    """stages.shrunk_excesses on a conditioned record (the tiny run's pitch record given a 3.2 s estimate, a flat
+    prior and a 4 Hz knowledge; the tiny record itself is too short for the band): a sine 30 × the estimate's RMS
+    at 2 Hz is shrunk to under a fifth, the Restorer puts the shrunk increment in the record and the estimate,
+    and σ takes the booked error in quadrature (stages.raised_uniformly); with excess_shrink off, the excess is
+    only reported."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+    from restore import stages
+    from restore.posterior import PosteriorSigma
+    from restore.restorer import Restorer
+
+    _, res = tiny_restored
+    assert res.settings.excess_shrink
+    dt, n = 4e-4, 8000
+    f = np.fft.rfftfreq(n, dt)
+    rng = np.random.default_rng(0)
+    base = np.cumsum(rng.standard_normal(n)) * 1e-9
+    t = np.arange(n) * dt
+    sine = 30 * np.std(base) * np.sin(2 * np.pi * 2.0 * t)
+    rec = res.integration["pitch"]
+    loud = replace(rec, increment=base + sine, previous=np.zeros(n), line_period_s=dt, highpass_hz=0.4,
+                   taus=np.array([0.0074, 0.0148, 0.0222]), knowledge_conditioned=True, conditioned_attitude_psd=None,
+                   spectrum=replace(rec.spectrum, freq=f, psd=np.full(f.size, 1e-15),
+                                    noise_std=np.array([3e-7, 3e-7, 3e-7])))
+    product = SimpleNamespace(ds=SimpleNamespace(attrs={"knowledge_cutoff_hz": 4.0}))
+    sh = stages.shrunk_excesses({"pitch": loud}, product, res.settings)["pitch"]
+    assert sh.shrunk and any(abs(h - 2.0) < 0.7 for h in sh.excess.excess_hz) and sh.excess.shrink_error_rad > 0
+    assert abs(np.dot(sh.increment - base, sine)) < 0.2 * np.dot(sine, sine)
+    records, estimate, excesses = Restorer(res.settings).shrink_excess(product, {"pitch": loud},
+                                                                       {"pitch": loud.increment}, _NoBar())
+    np.testing.assert_allclose(records["pitch"].increment, sh.increment)
+    np.testing.assert_allclose(estimate["pitch"], sh.increment)
+    ps = PosteriorSigma(sigma=np.full(n, 3e-8), noise_scale=1.0, samples=2, detrended_rms=3e-8,
+                        detrended_sigma=np.full(n, 3e-8))
+    up = stages.raised_uniformly({"pitch": ps}, {"pitch": excesses["pitch"].shrink_error_rad})["pitch"]
+    np.testing.assert_allclose(up.sigma, np.hypot(3e-8, sh.excess.shrink_error_rad))
+    assert up.detrended_rms == pytest.approx(np.hypot(3e-8, sh.excess.shrink_error_rad))
+    off = Restorer(replace(res.settings, excess_shrink=False))
+    records, _, excesses = off.shrink_excess(product, {"pitch": loud}, {"pitch": loud.increment}, _NoBar())
+    assert records["pitch"] is loud and excesses["pitch"].excess_hz and excesses["pitch"].shrink_error_rad is None
+    with pytest.raises(ScenarioError, match="excess_shrink"):
+        restoration_settings({"excess_shrink": 1})
+
+
+class _NoBar:
+    def note(self, *_):
+        pass
