@@ -296,16 +296,17 @@ def conditioned_excess_line(restoration, axes) -> str | None:
         hz = [float(f) for f in ex["excess_hz"]]
         text = (f"{a} at {min(hz):.1f}–{max(hz):.1f} Hz (up to {float(ex['max_ratio']):.1f} × what the "
                 f"prior allows, {float(ex['excess_rms_rad']) / ifov:.4f} px beyond it")
-        if ex.get("shrink_error_rad") is not None:
+        if ex.get("shrink_error_rad") is not None and ex["excess_hz"]:
             shrunk = True
-            text += f"; shrunk to a Wiener estimate there, σ holds its {float(ex['shrink_error_rad']) / ifov:.4f} px"
+            text += (f"; shrunk to a Wiener estimate there, σ holds its {float(ex['shrink_error_rad']) / ifov:.4f} px"
+                     f" and {float(ex.get('above_error_rad') or 0.0) / ifov:.4f} px of the same offset above the "
+                     "knowledge's band")
         found.append(text + ")")
     if not found:
         return None
     return ("  the images' estimate exceeds what the AOCS knowledge lets its prior hold: " + "; ".join(found)
             + ": noise that moves like an attitude in every pair (the scene's band offset), or knowledge error "
-              "its model lacks; " + ("σ may be optimistic above the knowledge's cut-off" if shrunk
-                                     else "σ may be optimistic there and above the knowledge's cut-off"))
+              "its model lacks" + ("" if shrunk else "; σ may be optimistic there and above the knowledge's cut-off"))
 
 
 def scene_offset_line_of_run(run, axes) -> str | None:

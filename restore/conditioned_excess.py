@@ -51,7 +51,7 @@ from .integration.transfer import fused_snr
 from .knowledge_check import _fitted_line, tapered_power
 
 __all__ = ["ConditionedExcess", "ExcessShrink", "lines_above_removed", "wiener_output_power", "estimate_power",
-           "conditioned_excess", "record_conditioned_excess", "excess_gain", "shrunk_excess", "excess_factor",
+           "conditioned_excess", "record_conditioned_excess", "excess_gain", "shrunk_excess", "excess_factor", "offset_error_above", "as_read", "input_offset",
            "EXCESS_FALSE_ALARM", "BIN_DOF",
            "BAND_FRACTION", "KNOWLEDGE_MODEL_ERROR"]
 
@@ -113,19 +113,31 @@ class ConditionedExcess:
     #: where the estimate was shrunk (:func:`shrunk_excess`), the Wiener error the excess still leaves there
     #: beyond the draws' [rad], booked on σ; None: not shrunk (a diagnostic only)
     shrink_error_rad: float | None = None
+    #: where shrunk, the error the same offset brings above the band, where the images restore alone [rad]
+    #: (:func:`offset_error_above`), booked on σ too; None: not shrunk
+    above_error_rad: float | None = None
+
+    @property
+    def booked_rad(self) -> float | None:
+        """What σ books of it [rad]: the two errors in quadrature; None where not shrunk."""
+        if self.shrink_error_rad is None:
+            return None
+        return float(np.hypot(self.shrink_error_rad, self.above_error_rad or 0.0))
 
     def as_dict(self) -> dict:
         """Plain values, as restoration.nc records them (:meth:`from_dict` reads them back)."""
         return {"band_hz": [float(v) for v in self.band_hz], "excess_hz": [float(v) for v in self.excess_hz],
                 "max_ratio": float(self.max_ratio), "excess_rms_rad": float(self.excess_rms_rad),
-                "shrink_error_rad": None if self.shrink_error_rad is None else float(self.shrink_error_rad)}
+                "shrink_error_rad": None if self.shrink_error_rad is None else float(self.shrink_error_rad),
+                "above_error_rad": None if self.above_error_rad is None else float(self.above_error_rad)}
 
     @classmethod
     def from_dict(cls, d: dict) -> "ConditionedExcess":
         """The excess :meth:`as_dict` wrote."""
         return cls(band_hz=tuple(float(v) for v in d["band_hz"]), excess_hz=[float(v) for v in d["excess_hz"]],
                    max_ratio=float(d["max_ratio"]), excess_rms_rad=float(d["excess_rms_rad"]),
-                   shrink_error_rad=None if d.get("shrink_error_rad") is None else float(d["shrink_error_rad"]))
+                   shrink_error_rad=None if d.get("shrink_error_rad") is None else float(d["shrink_error_rad"]),
+                   above_error_rad=None if d.get("above_error_rad") is None else float(d["above_error_rad"]))
 
 
 def lines_above_removed(x, mask, top_bin: int, *, ratio: float = LINE_RATIO, max_lines: int = MAX_LINES,
@@ -189,9 +201,10 @@ def fused_noise_per_bin(freq, noise_std, taus, dt: float, n: int) -> np.ndarray:
 def _band_powers(increment, prior_freq, prior_psd, noise_std, taus, dt: float, highpass_hz: float,
                  cutoff_hz: float, fraction: float, model_psd=None):
     """What both :func:`conditioned_excess` and :func:`shrunk_excess` read, or None (too short a record or band):
-    ``(f, band, v, lines, power, prior, model, noise)`` — the estimate ``v`` with the lines above the band fitted
-    out (``lines``), its smoothed tapered power, the MAP's prior, the prior with the knowledge's model error
-    (:data:`KNOWLEDGE_MODEL_ERROR`), the fused noise, per bin of ``rfftfreq(lines, dt)``."""
+    ``(f, band, v, lines, power, prior, model, noise, expected)`` — the estimate ``v`` with the lines above the
+    band fitted out (``lines``), its smoothed tapered power, the MAP's prior, the prior with the knowledge's model
+    error (:data:`KNOWLEDGE_MODEL_ERROR`), the fused noise, and the estimate's expected power as the periodogram
+    reads it (:func:`estimate_power`, :func:`as_read`), per bin of ``rfftfreq(lines, dt)``."""
     x = np.asarray(increment, dtype=np.float64)
     ok = np.isfinite(x)
     n = x.size
@@ -209,7 +222,36 @@ def _band_powers(increment, prior_freq, prior_psd, noise_std, taus, dt: float, h
     prior = np.interp(f, pf, np.asarray(prior_psd, dtype=np.float64)) * 2 * df
     model = prior if model_psd is None else \
         prior + KNOWLEDGE_MODEL_ERROR ** 2 * np.interp(f, pf, np.asarray(model_psd, dtype=np.float64)) * 2 * df
-    return f, band, v, np.where(ok, x, 0.0) - v, power, prior, model, fused_noise_per_bin(f, noise_std, taus, dt, n)
+    noise = fused_noise_per_bin(f, noise_std, taus, dt, n)
+    # read within the band (beyond it lie the strong lines fitted out of ``v``); a bin whose expectation is
+    # nothing next to the band's (the conditioned prior where the attitude is below its predicted error) holds
+    # only what leaks from out of the band, and is not read (0)
+    expected = np.zeros_like(f)
+    expected[b] = as_read(estimate_power(prior, model, noise)[b])
+    expected[expected < NOTHING_EXPECTED * float(np.median(expected[b]))] = 0.0
+    return f, band, v, np.where(ok, x, 0.0) - v, power, prior, model, noise, expected
+
+
+#: a bin whose expected power is below this fraction of the band's median is not read (nothing is expected there)
+NOTHING_EXPECTED = 1e-3
+#: the expected Hann-tapered periodogram of a process is its power per bin convolved with this (the taper's
+#: spectral window, normalised)
+HANN_LEAKAGE = np.array([1.0, 4.0, 1.0]) / 6.0
+
+
+def as_read(expected) -> np.ndarray:
+    """The power per bin ``expected`` as the smoothed tapered periodogram reads it: through the Hann taper's
+    leakage and the 3-bin running mean. A prior that drops to zero (the conditioned prior where the attitude is
+    below its predicted error) is then not compared with what its neighbours leak into it.
+
+    Examples
+    --------
+    >>> as_read([0.0, 0.0, 6.0, 0.0, 0.0, 0.0]).round(3).tolist()
+    [0.333, 1.667, 2.0, 1.667, 0.333, 0.0]
+    """
+    e = np.nan_to_num(np.asarray(expected, dtype=np.float64), nan=0.0, posinf=0.0)
+    leaked = np.convolve(np.pad(e, 1, mode="edge"), HANN_LEAKAGE, mode="valid")
+    return uniform_filter1d(leaked, 3, mode="nearest")
 
 
 def estimate_power(prior, truth_prior, noise) -> np.ndarray:
@@ -248,11 +290,11 @@ def conditioned_excess(increment, prior_freq, prior_psd, noise_std, taus, dt: fl
                        model_psd)
     if got is None:
         return None
-    f, band, _, _, power, prior, model, noise = got
-    b = np.flatnonzero(band)
-    expected = estimate_power(prior, model, noise)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(expected[b] > 0, power[b] / expected[b], np.inf)
+    f, band, _, _, power, _, _, _, expected = got
+    b = np.flatnonzero(band & (expected > 0))          # a bin no prior reaches says nothing
+    if b.size < 2:
+        return None
+    ratio = power[b] / expected[b]
     over = ratio > (excess_factor(b.size) if factor is None else factor)
     excess = float(np.sum(np.maximum(power[b][over] - expected[b][over], 0.0)))
     finite = ratio[np.isfinite(ratio)]
@@ -272,47 +314,54 @@ def record_conditioned_excess(record, cutoff_hz: float | None) -> ConditionedExc
                               cutoff_hz=float(cutoff_hz), model_psd=getattr(record, "conditioned_attitude_psd", None))
 
 
-def excess_gain(power, prior, truth_prior, noise, *, factor: float = 2.5) -> np.ndarray:
-    """Per bin, the gain that makes the MAP's estimate (prior ``S``) of power ``power`` a minimum-variance one
-    where it holds more than ``factor`` × :func:`estimate_power`; 1 elsewhere.
+def excess_gain(power, expected, *, factor: float = 1.0) -> np.ndarray:
+    """Per bin, the gain that makes the MAP's estimate of power ``power`` a minimum-variance one where it holds
+    more than ``factor`` × its expectation ``expected`` (:func:`estimate_power`): ``expected / power`` there, 1
+    elsewhere (and where nothing is expected).
 
-    The estimate is ``S / (S + N)`` × its input; an input of power ``T = X (S + N)² / S²`` above ``S' + N`` holds
+    The estimate is ``g = S / (S + N)`` × its input; an input of power ``T = X / g²`` above ``S' + N`` holds
     ``O = T − S' − N`` that is neither the attitude nor the modelled noise, and the minimum-variance gain with
-    ``O`` counted as noise, ``S' / T``, is the estimate's own times ``S' (S + N) / (S T)`` (``E[X] / X`` where
-    ``S' = S``), at most 1.
+    ``O`` counted as noise, ``S' / T``, is the estimate's own times ``S' / (g T) = E[X] / X`` (``S'`` the
+    attitude's power, ``E[X] = g² (S' + N)`` at the MAP's ``S = S'``; with ``S' > S`` the excess test already
+    allows for it).
 
     Examples
     --------
-    >>> excess_gain([0.5, 2.0, 0.1], [1.0, 1.0, 1.0], [1.0, 1.0, 1.0], [1.0, 1.0, 1.0]).tolist()
-    [1.0, 0.25, 1.0]
+    >>> excess_gain([0.5, 2.0, 0.1, 1.0], [1.0, 0.5, 1.0, 0.0]).tolist()
+    [1.0, 0.25, 1.0, 1.0]
     """
     x = np.asarray(power, dtype=np.float64)
-    sp = np.asarray(prior, dtype=np.float64)
-    st = np.asarray(truth_prior, dtype=np.float64)
-    nn = np.asarray(noise, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = x * (sp + nn) ** 2 / np.where(sp > 0, sp, 1.0) ** 2
-        w = np.where(t > 0, st * (sp + nn) / (np.where(sp > 0, sp, 1.0) * np.where(t > 0, t, 1.0)), 1.0)
-    over = (x > factor * estimate_power(sp, st, nn)) & (x > 0) & (sp > 0) & np.isfinite(w)
-    return np.where(over, np.clip(np.nan_to_num(w, nan=1.0), 0.0, 1.0), 1.0)
+    e = np.asarray(expected, dtype=np.float64)
+    over = (x > factor * e) & (e > 0) & (x > 0)
+    return np.where(over, np.clip(e / np.where(over, x, 1.0), 0.0, 1.0), 1.0)
 
 
-def _added_error(power, prior, truth_prior, noise, gain) -> np.ndarray:
+def _added_error(power, expected, prior, truth_prior, noise, gain) -> np.ndarray:
     """Per bin, what the offset ``O`` adds to the draws' error ``S' N / (S' + N)`` once the estimate is shrunk by
     ``w = gain``: ``(1 − w g)² S' + w² g² (O + N)`` less that, ``g = S / (S + N)`` the MAP's gain and
-    ``O = T − S' − N`` from the input's power ``T = X / g²`` (:func:`excess_gain`); 0 where not shrunk."""
-    x = np.asarray(power, dtype=np.float64)
+    ``O = (X / E[X] − 1)(S' + N)`` the input's power beyond its expectation (:func:`excess_gain`); 0 where not
+    shrunk."""
     sp = np.asarray(prior, dtype=np.float64)
     st = np.asarray(truth_prior, dtype=np.float64)
     nn = np.asarray(noise, dtype=np.float64)
     w = np.asarray(gain, dtype=np.float64)
     shrunk = (w < 1.0) & (sp > 0)
+    offset = input_offset(power, expected, truth_prior, noise)
     with np.errstate(divide="ignore", invalid="ignore"):
         g = sp / (sp + nn)
-        offset = np.maximum(x / (g * g) - st - nn, 0.0)
         after = (1.0 - w * g) ** 2 * st + (w * g) ** 2 * (offset + nn)
         before = st * nn / (st + nn)
     return np.where(shrunk, np.maximum(np.nan_to_num(after - before, nan=0.0, posinf=0.0), 0.0), 0.0)
+
+
+def input_offset(power, expected, truth_prior, noise) -> np.ndarray:
+    """Per bin, the differentials' power beyond the attitude's and the noise's, seen as an attitude:
+    ``(X / E[X] − 1)(S' + N)``, at least 0 (0 where nothing is expected)."""
+    x = np.asarray(power, dtype=np.float64)
+    e = np.asarray(expected, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        o = (x / np.where(e > 0, e, 1.0) - 1.0) * (np.asarray(truth_prior, dtype=np.float64) + noise)
+    return np.where(e > 0, np.maximum(np.nan_to_num(o, nan=0.0, posinf=0.0), 0.0), 0.0)
 
 
 @dataclass(frozen=True)
@@ -365,25 +414,63 @@ def _band_change(v, mask, gain, freq, dt: float) -> np.ndarray:
 
 def shrunk_excess(increment, prior_freq, prior_psd, noise_std, taus, dt: float, *, highpass_hz: float,
                   cutoff_hz: float, fraction: float = BAND_FRACTION, factor: float | None = None,
-                  model_psd=None) -> ExcessShrink | None:
+                  model_psd=None, top_hz: float | None = None) -> ExcessShrink | None:
     """The estimate with its band's excess over the Wiener output shrunk (:func:`excess_gain`), the strong
     lines above the band fitted out first and kept whole; None where :func:`conditioned_excess` is None.
-    The excess returned holds the offset's Wiener error in the shrunk bins (``shrink_error_rad``), what σ must
-    hold beyond the draws. Parameters as :func:`conditioned_excess`."""
+    The excess returned holds the offset's Wiener error in the shrunk bins (``shrink_error_rad``) and, with
+    ``top_hz`` (the top of :func:`restore.observability.scene_offset_band`), the error the same offset brings
+    above the band up to there (``above_error_rad``, :func:`offset_error_above`): what σ must hold beyond the
+    draws. Parameters as :func:`conditioned_excess`."""
     ex = conditioned_excess(increment, prior_freq, prior_psd, noise_std, taus, dt, highpass_hz=highpass_hz,
                             cutoff_hz=cutoff_hz, fraction=fraction, factor=factor, model_psd=model_psd)
     if ex is None:
         return None
-    f, band, v, lines, power, prior, model, noise = _band_powers(
+    f, band, v, lines, power, prior, model, noise, expected = _band_powers(
         increment, prior_freq, prior_psd, noise_std, taus, dt, highpass_hz, cutoff_hz, fraction, model_psd)
     # the test is the band's (family-wise); once it fires, every bin above its expectation is shrunk by the
     # plug-in Wiener gain: the offset is broad, and a bin of it below the threshold keeps it otherwise
-    gain = np.where(band, excess_gain(power, prior, model, noise, factor=SHRINK_FROM), 1.0) if ex.excess_hz \
+    gain = np.where(band, excess_gain(power, expected, factor=SHRINK_FROM), 1.0) if ex.excess_hz \
         else np.ones_like(f)
     x = np.asarray(increment, dtype=np.float64)
     if np.all(gain == 1.0):
-        return ExcessShrink(x, replace(ex, shrink_error_rad=0.0), gain)
+        return ExcessShrink(x, replace(ex, shrink_error_rad=0.0, above_error_rad=0.0), gain)
     ok = np.isfinite(x)
     new = np.where(ok, x + _band_change(v, ok, gain, f, dt), np.nan)
-    added = float(np.sqrt(np.sum(_added_error(power, prior, model, noise, gain))))
-    return ExcessShrink(new, replace(ex, shrink_error_rad=added), gain)
+    added = float(np.sqrt(np.sum(_added_error(power, expected, prior, model, noise, gain))))
+    fired = np.isin(f, ex.excess_hz)
+    offset = np.where(fired, input_offset(power, expected, model, noise), 0.0)
+    above = offset_error_above(offset, f, fired, prior, noise, float(f[band].max()), top_hz) \
+        if top_hz is not None else 0.0
+    return ExcessShrink(new, replace(ex, shrink_error_rad=added, above_error_rad=float(np.sqrt(above))), gain)
+
+
+def offset_error_above(offset, freq, fired, prior, noise, band_top_hz: float, top_hz: float) -> float:
+    """The error [rad², a mean square] an attitude-like offset measured in the bins ``fired`` brings above the
+    band (``band_top_hz``) up to ``top_hz``, where the images restore alone and nothing tells it from the
+    attitude. The offset is taken flat in the differentials (a band offset proportional to the bands' places,
+    following the scene's content, gives pair ``j`` ``τ_j`` times a slow signal: an attitude's differential
+    ``2π f τ_j θ`` below ``1 / (2π τ)``), so ``O(f) = c / f²`` in the attitude, ``c`` the mean of ``O f²`` over
+    ``fired``; per bin, the Wiener error with ``O`` counted as noise less the draws' own,
+    ``S (O + N) / (S + O + N) − S N / (S + N)``. Measured on unseen low-bandwidth scenes it is 1.5–2 × the
+    error found there in amplitude (the offset falls a little faster than flat): an upper side.
+
+    Examples
+    --------
+    >>> f = np.arange(8.0)
+    >>> o = np.where((f >= 1) & (f <= 2), 4.0 / np.maximum(f, 1) ** 2, 0.0)          # c = 4
+    >>> round(offset_error_above(o, f, o > 0, np.full(8, 1e9), np.zeros(8), 2.0, 4.0), 4)    # 4/9 + 4/16
+    0.6944
+    """
+    f = np.asarray(freq, dtype=np.float64)
+    b = np.asarray(fired, dtype=bool) & (f > 0)
+    if not b.any():
+        return 0.0
+    c = float(np.mean(np.asarray(offset, dtype=np.float64)[b] * f[b] ** 2))
+    above = (f > band_top_hz) & (f <= top_hz)
+    sp = np.asarray(prior, dtype=np.float64)[above]
+    nn = np.asarray(noise, dtype=np.float64)[above]
+    oo = c / f[above] ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        after = np.where(sp + oo + nn > 0, sp * (oo + nn) / (sp + oo + nn), 0.0)
+        before = np.where(sp + nn > 0, sp * nn / (sp + nn), 0.0)
+    return float(np.sum(np.maximum(np.nan_to_num(after - before, nan=0.0, posinf=0.0), 0.0)))

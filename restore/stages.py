@@ -1207,9 +1207,9 @@ def raised_uniformly(sigma: dict, errors: dict) -> dict:
 
 def raise_by_excess_shrink(sigma: dict, excesses: dict) -> dict:
     """Each axis's σ raised in quadrature by the error its excess shrink still leaves
-    (``ConditionedExcess.shrink_error_rad``, :func:`shrunk_excesses`), where one ran; a new dict."""
-    return raised_uniformly(sigma, {a: ex.shrink_error_rad for a, ex in excesses.items()
-                                    if ex.shrink_error_rad is not None})
+    in its band and above it (``ConditionedExcess.booked_rad``, :func:`shrunk_excesses`), where one ran; a new
+    dict."""
+    return raised_uniformly(sigma, {a: ex.booked_rad for a, ex in excesses.items() if ex.booked_rad is not None})
 
 
 def shrunk_excesses(records: dict, product: Product, settings: RestorationSettings) -> dict:
@@ -1217,6 +1217,7 @@ def shrunk_excesses(records: dict, product: Product, settings: RestorationSettin
     (:func:`restore.conditioned_excess.shrunk_excess`): its estimate with the band's excess over the Wiener output
     shrunk. Empty with ``excess_shrink`` off or when the product does not record the knowledge's cut-off."""
     from .conditioned_excess import shrunk_excess
+    from .observability import scene_offset_band
 
     cutoff = product.ds.attrs.get("knowledge_cutoff_hz")
     if not settings.excess_shrink or cutoff is None:
@@ -1226,9 +1227,10 @@ def shrunk_excesses(records: dict, product: Product, settings: RestorationSettin
         if not rec.knowledge_conditioned or rec.spectrum is None:
             continue
         sp = rec.spectrum
+        top = scene_offset_band(rec.taus, float(cutoff))
         sh = shrunk_excess(rec.increment, sp.freq, sp.psd, sp.noise_std, rec.taus, float(rec.line_period_s),
                            highpass_hz=float(rec.highpass_hz), cutoff_hz=float(cutoff),
-                           model_psd=rec.conditioned_attitude_psd)
+                           model_psd=rec.conditioned_attitude_psd, top_hz=top[1] if top is not None else None)
         if sh is not None:
             out[a] = sh
     return out

@@ -918,7 +918,7 @@ def test_an_estimate_over_its_conditioned_prior_is_shrunk_and_its_error_booked(t
     """stages.shrunk_excesses on a conditioned record (the tiny run's pitch record given a 3.2 s estimate, a flat
     prior and a 4 Hz knowledge; the tiny record itself is too short for the band): a sine 30 × the estimate's RMS
     at 2 Hz is shrunk to under a fifth, the Restorer puts the shrunk increment in the record and the estimate,
-    and σ takes the booked error in quadrature (stages.raised_uniformly); with excess_shrink off, the excess is
+    and σ takes the booked error in quadrature (stages.raise_by_excess_shrink); with excess_shrink off, the excess is
     only reported."""
     from dataclasses import replace
     from types import SimpleNamespace
@@ -942,6 +942,9 @@ def test_an_estimate_over_its_conditioned_prior_is_shrunk_and_its_error_booked(t
     product = SimpleNamespace(ds=SimpleNamespace(attrs={"knowledge_cutoff_hz": 4.0}))
     sh = stages.shrunk_excesses({"pitch": loud}, product, res.settings)["pitch"]
     assert sh.shrunk and any(abs(h - 2.0) < 0.7 for h in sh.excess.excess_hz) and sh.excess.shrink_error_rad > 0
+    # the same offset extrapolated above the band (3.6 Hz) up to the scene offset band's top (6.8 Hz)
+    assert sh.excess.above_error_rad > 0
+    assert sh.excess.booked_rad == pytest.approx(np.hypot(sh.excess.shrink_error_rad, sh.excess.above_error_rad))
     assert abs(np.dot(sh.increment - base, sine)) < 0.2 * np.dot(sine, sine)
     records, estimate, excesses = Restorer(res.settings).shrink_excess(product, {"pitch": loud},
                                                                        {"pitch": loud.increment}, _NoBar())
@@ -949,9 +952,9 @@ def test_an_estimate_over_its_conditioned_prior_is_shrunk_and_its_error_booked(t
     np.testing.assert_allclose(estimate["pitch"], sh.increment)
     ps = PosteriorSigma(sigma=np.full(n, 3e-8), noise_scale=1.0, samples=2, detrended_rms=3e-8,
                         detrended_sigma=np.full(n, 3e-8))
-    up = stages.raised_uniformly({"pitch": ps}, {"pitch": excesses["pitch"].shrink_error_rad})["pitch"]
-    np.testing.assert_allclose(up.sigma, np.hypot(3e-8, sh.excess.shrink_error_rad))
-    assert up.detrended_rms == pytest.approx(np.hypot(3e-8, sh.excess.shrink_error_rad))
+    up = stages.raise_by_excess_shrink({"pitch": ps}, excesses)["pitch"]
+    np.testing.assert_allclose(up.sigma, np.hypot(3e-8, sh.excess.booked_rad))
+    assert up.detrended_rms == pytest.approx(np.hypot(3e-8, sh.excess.booked_rad))
     off = Restorer(replace(res.settings, excess_shrink=False))
     records, _, excesses = off.shrink_excess(product, {"pitch": loud}, {"pitch": loud.increment}, _NoBar())
     assert records["pitch"] is loud and excesses["pitch"].excess_hz and excesses["pitch"].shrink_error_rad is None
