@@ -257,3 +257,21 @@ def test_bins_where_the_prior_expects_nothing_are_not_read():
         x = x + _series(np.where((f > 0.9) & (f < 1.5), 0.3 * expected.max(), 0.0), np.random.default_rng(seed))
         ex = conditioned_excess(x, f, psd, NOISE, TAUS, DT, highpass_hz=HP, cutoff_hz=CUTOFF)
         assert not any(1.0 < h < 1.4 for h in ex.excess_hz)
+
+
+def test_a_band_change_far_beyond_what_the_shrink_takes_is_not_applied(monkeypatch):
+    """The guard: a change whose power exceeds CHANGE_GUARD × the shrunk bins' own (1 − w)² X is a fit gone
+    wrong (leakage the tapered periodogram did not see: geo_noisy_knowledge's pitch would have moved by 0.32 px),
+    and the estimate is kept, nothing booked; the same change within the bound is applied."""
+    import restore.conditioned_excess as ce
+
+    f = np.fft.rfftfreq(N, DT)
+    _, truth, est, sh = _wiener_case(10.0, 0)
+    assert sh.shrunk
+    right = sh.increment - est
+    monkeypatch.setattr(ce, "_band_change", lambda *a, **k: 30.0 * right)
+    wild = ce.shrunk_excess(est, f, np.full(f.size, PRIOR_PSD), NOISE, TAUS, DT, highpass_hz=HP, cutoff_hz=2 * CUTOFF)
+    assert not wild.shrunk and np.array_equal(wild.increment, est) and wild.excess.booked_rad == 0.0
+    monkeypatch.setattr(ce, "_band_change", lambda *a, **k: right)
+    fine = ce.shrunk_excess(est, f, np.full(f.size, PRIOR_PSD), NOISE, TAUS, DT, highpass_hz=HP, cutoff_hz=2 * CUTOFF)
+    assert fine.shrunk and np.allclose(fine.increment, sh.increment)
