@@ -446,8 +446,8 @@ def shrunk_excess(increment, prior_freq, prior_psd, noise_std, taus, dt: float, 
     # what the shrink may take at most: the shrunk bins' own power, (1 − w)² X; a change far beyond it is a fit
     # gone wrong (leakage the taper did not see), and the estimate is kept as it is
     allowed = float(np.sum((1.0 - gain) ** 2 * power))
-    if np.mean(change[ok] ** 2) > CHANGE_GUARD * allowed:
-        return ExcessShrink(x, replace(ex, shrink_error_rad=0.0, above_error_rad=0.0), np.ones_like(f))
+    if np.mean(change[ok] ** 2) > CHANGE_GUARD * allowed:     # not shrunk, nothing booked: the excess reported
+        return ExcessShrink(x, ex, np.ones_like(f))
     new = np.where(ok, x + change, np.nan)
     added = float(np.sqrt(np.sum(_added_error(power, expected, prior, model, noise, gain))))
     fired = np.isin(f, ex.excess_hz)
