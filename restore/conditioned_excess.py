@@ -201,10 +201,10 @@ def fused_noise_per_bin(freq, noise_std, taus, dt: float, n: int) -> np.ndarray:
 def _band_powers(increment, prior_freq, prior_psd, noise_std, taus, dt: float, highpass_hz: float,
                  cutoff_hz: float, fraction: float, model_psd=None):
     """What both :func:`conditioned_excess` and :func:`shrunk_excess` read, or None (too short a record or band):
-    ``(f, band, v, lines, power, prior, model, noise, expected)`` — the estimate ``v`` with the lines above the
-    band fitted out (``lines``), its smoothed tapered power, the MAP's prior, the prior with the knowledge's model
+    ``(f, band, v, power, prior, model, noise, expected)`` — the estimate ``v`` with the strong lines above the
+    band fitted out, its smoothed tapered power, the MAP's prior, the prior with the knowledge's model
     error (:data:`KNOWLEDGE_MODEL_ERROR`), the fused noise, and the estimate's expected power as the periodogram
-    reads it (:func:`estimate_power`, :func:`as_read`), per bin of ``rfftfreq(lines, dt)``."""
+    reads it (:func:`estimate_power`, :func:`as_read`), per bin of ``rfftfreq(n, dt)``."""
     x = np.asarray(increment, dtype=np.float64)
     ok = np.isfinite(x)
     n = x.size
@@ -229,7 +229,7 @@ def _band_powers(increment, prior_freq, prior_psd, noise_std, taus, dt: float, h
     expected = np.zeros_like(f)
     expected[b] = as_read(estimate_power(prior, model, noise)[b])
     expected[expected < NOTHING_EXPECTED * float(np.median(expected[b]))] = 0.0
-    return f, band, v, np.where(ok, x, 0.0) - v, power, prior, model, noise, expected
+    return f, band, v, power, prior, model, noise, expected
 
 
 #: the band change may hold at most this many times the power it is meant to take (the shrunk bins' (1 − w)² X)
@@ -290,19 +290,21 @@ def conditioned_excess(increment, prior_freq, prior_psd, noise_std, taus, dt: fl
     """
     got = _band_powers(increment, prior_freq, prior_psd, noise_std, taus, dt, highpass_hz, cutoff_hz, fraction,
                        model_psd)
-    if got is None:
-        return None
-    f, band, _, _, power, _, _, _, expected = got
+    return None if got is None else _excess_of(got, factor)
+
+
+def _excess_of(got, factor: float | None) -> ConditionedExcess | None:
+    """The test of :func:`conditioned_excess` on what :func:`_band_powers` read (``got``); None when fewer than
+    two bins of the band expect anything."""
+    f, band, _, power, _, _, _, expected = got
     b = np.flatnonzero(band & (expected > 0))          # a bin no prior reaches says nothing
     if b.size < 2:
         return None
     ratio = power[b] / expected[b]
     over = ratio > (excess_factor(b.size) if factor is None else factor)
     excess = float(np.sum(np.maximum(power[b][over] - expected[b][over], 0.0)))
-    finite = ratio[np.isfinite(ratio)]
     return ConditionedExcess(band_hz=(float(f[b[0]]), float(f[b[-1]])), excess_hz=[float(v) for v in f[b][over]],
-                             max_ratio=float(finite.max()) if finite.size else float("inf"),
-                             excess_rms_rad=float(np.sqrt(excess)))
+                             max_ratio=float(ratio.max()), excess_rms_rad=float(np.sqrt(excess)))
 
 
 def record_conditioned_excess(record, cutoff_hz: float | None) -> ConditionedExcess | None:
@@ -428,12 +430,12 @@ def shrunk_excess(increment, prior_freq, prior_psd, noise_std, taus, dt: float, 
     ``top_hz`` (the top of :func:`restore.observability.scene_offset_band`), the error the same offset brings
     above the band up to there (``above_error_rad``, :func:`offset_error_above`): what σ must hold beyond the
     draws. Parameters as :func:`conditioned_excess`."""
-    ex = conditioned_excess(increment, prior_freq, prior_psd, noise_std, taus, dt, highpass_hz=highpass_hz,
-                            cutoff_hz=cutoff_hz, fraction=fraction, factor=factor, model_psd=model_psd)
+    got = _band_powers(increment, prior_freq, prior_psd, noise_std, taus, dt, highpass_hz, cutoff_hz, fraction,
+                       model_psd)
+    ex = None if got is None else _excess_of(got, factor)
     if ex is None:
         return None
-    f, band, v, lines, power, prior, model, noise, expected = _band_powers(
-        increment, prior_freq, prior_psd, noise_std, taus, dt, highpass_hz, cutoff_hz, fraction, model_psd)
+    f, band, v, power, prior, model, noise, expected = got
     # the test is the band's (family-wise); once it fires, every bin above its expectation is shrunk by the
     # plug-in Wiener gain: the offset is broad, and a bin of it below the threshold keeps it otherwise
     gain = np.where(band, excess_gain(power, expected, factor=SHRINK_FROM), 1.0) if ex.excess_hz \
