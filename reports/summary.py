@@ -188,7 +188,7 @@ def scene_offset_line(product_attrs, taus, axes, ephemeris=None) -> str | None:
     of the band (:func:`restore.observability.scene_offset_band`), the product does not record the sun or the
     knowledge, or it is not a push-broom acquisition.
     """
-    from restore.observability import scene_offset_band, sun_offset_shares
+    from restore.observability import scene_offset_band, sun_offset_shares, track_azimuth_deg
 
     at = dict(product_attrs or {})
     if at.get("acquisition", "pushbroom") != "pushbroom" or "sun_azimuth_deg" not in at:
@@ -196,12 +196,7 @@ def scene_offset_line(product_attrs, taus, axes, ephemeris=None) -> str | None:
     band = scene_offset_band(taus, at.get("knowledge_cutoff_hz"))
     if band is None:
         return None
-    track = 0.0
-    if ephemeris is not None:
-        e = np.asarray(ephemeris, dtype=np.float64)
-        if e.ndim == 2 and e.shape[0] > 1 and np.all(np.isfinite(e[[0, -1], :2])):
-            v = e[-1, :2] - e[0, :2]
-            track = float(np.degrees(np.arctan2(v[1], v[0]))) if np.hypot(*v) > 0 else 0.0
+    track = track_azimuth_deg(ephemeris)
     shares = sun_offset_shares(float(at["sun_azimuth_deg"]), track)
     named = [f"{shares[a] * 100:.0f} % on {a}" for a in ("pitch", "roll") if a in axes]
     if not named:
@@ -288,9 +283,11 @@ def conditioned_excess_line(restoration, axes) -> str | None:
     if restoration is None or "pixel_ifov_rad" not in restoration.attrs:
         return None
     ifov = float(restoration.attrs["pixel_ifov_rad"])
-    found, shrunk = [], False
+    found, shrunk, shared = [], False, []
     for a in axes:
         ex = _sigma_json(restoration.variables.get(f"sigma_{a}"), "conditioned_excess")
+        if ex and ex.get("shared_above_rad"):
+            shared.append(f"{a} {float(ex['shared_above_rad']) / ifov:.4f} px")
         if not ex or not ex.get("excess_hz"):
             continue
         hz = [float(f) for f in ex["excess_hz"]]
@@ -306,7 +303,9 @@ def conditioned_excess_line(restoration, axes) -> str | None:
         return None
     return ("  the images' estimate exceeds what the AOCS knowledge lets its prior hold: " + "; ".join(found)
             + ": noise that moves like an attitude in every pair (the scene's band offset), or knowledge error "
-              "its model lacks" + ("" if shrunk else "; σ may be optimistic there and above the knowledge's cut-off"))
+              "its model lacks" + ("" if shrunk else "; σ may be optimistic there and above the knowledge's cut-off")
+            + ("" if not shared else "; the same offset, split by the sun's direction, σ holds above the band on "
+               + ", ".join(shared)))
 
 
 def scene_offset_line_of_run(run, axes) -> str | None:

@@ -63,7 +63,7 @@ import numpy as np
 from .integration.transfer import fused_snr
 
 __all__ = ["Observability", "fused_snr", "observability", "record_observability", "band_power", "record_trend",
-           "scene_offset_band", "knowledge_filter_error_below", "sun_offset_shares", "offset_misfit", "OFFSET_MISFIT", "NotchContinuum",
+           "scene_offset_band", "knowledge_filter_error_below", "sun_offset_shares", "track_azimuth_deg", "offset_misfit", "OFFSET_MISFIT", "NotchContinuum",
            "notch_continuum", "record_notch_continuum", "wiener_error"]
 
 
@@ -346,6 +346,24 @@ def knowledge_filter_error_below(knowledge, dt: float, *, highpass_hz: float, cu
     e = np.fft.irfft(np.fft.rfft(xe) * r * (1.0 - highpass_gain(f, highpass_hz)), 2 * n)[:n]
     e = e - np.polyval(np.polyfit(u, e, 1), u)
     return float(np.sqrt(np.mean(e ** 2)))
+
+
+def track_azimuth_deg(ephemeris) -> float:
+    """The track's azimuth [deg, from the local +x towards +y]: the direction from the first to the last
+    platform position of ``ephemeris`` (lines, 3) [m]; 0 (+x) when absent, too short or not moving.
+
+    Examples
+    --------
+    >>> track_azimuth_deg([[0.0, 0.0, 7e5], [10.0, 10.0, 7e5]]), track_azimuth_deg(None)
+    (45.0, 0.0)
+    """
+    if ephemeris is None:
+        return 0.0
+    e = np.asarray(ephemeris, dtype=np.float64)
+    if e.ndim != 2 or e.shape[0] < 2 or e.shape[1] < 2 or not np.all(np.isfinite(e[[0, -1], :2])):
+        return 0.0
+    v = e[-1, :2] - e[0, :2]
+    return float(np.degrees(np.arctan2(v[1], v[0]))) if np.hypot(*v) > 0 else 0.0
 
 
 def sun_offset_shares(sun_azimuth_deg: float, track_azimuth_deg: float = 0.0) -> dict:

@@ -414,7 +414,8 @@ class Restorer:
         """With ``excess_shrink``: where an axis's estimate holds more, in the band its prior is conditioned on the
         AOCS knowledge, than a Wiener output can, shrink it there (:func:`stages.shrunk_excesses`). Returns
         (records, estimate, ``{axis: ConditionedExcess}``): the excess found on every conditioned axis, its
-        ``shrink_error_rad`` set where shrunk (what σ must hold); without the shrink, the excess as a diagnostic
+        ``shrink_error_rad`` set where shrunk and ``shared_above_rad`` where another axis's offset reaches it
+        (:func:`stages.offset_shared_excesses`): what σ must hold; without the shrink, the excess as a diagnostic
         (:func:`stages.conditioned_excesses`)."""
         if not self.settings.excess_shrink:
             return records, estimate, stages.conditioned_excesses(records, product)
@@ -425,7 +426,8 @@ class Restorer:
                      + ", ".join(sorted(done)))
             records, estimate = dict(records), dict(estimate)
             _take_records(records, estimate, done)
-        return records, estimate, {a: sh.excess for a, sh in shrinks.items()}
+        # the offset one axis shows first reaches the others by the sun's split, above the knowledge's band
+        return records, estimate, stages.offset_shared_excesses({a: sh.excess for a, sh in shrinks.items()}, product)
 
     def lower_highpass(self, product: Product, pairs: list, knowledge: dict, records: dict, estimate: dict,
                        sigma: dict, timings: dict, bar) -> tuple:

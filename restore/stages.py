@@ -52,7 +52,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_error_prior", "conditioned_excesses", "shrunk_excesses", "raised_uniformly", "raise_by_excess_shrink", "knowledge_filter_errors", "knowledge_latency_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_latency", "advanced_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_error_prior", "conditioned_excesses", "shrunk_excesses", "offset_shared_excesses", "raised_uniformly", "raise_by_excess_shrink", "knowledge_filter_errors", "knowledge_latency_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_latency", "advanced_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -1207,8 +1207,8 @@ def raised_uniformly(sigma: dict, errors: dict) -> dict:
 
 def raise_by_excess_shrink(sigma: dict, excesses: dict) -> dict:
     """Each axis's σ raised in quadrature by the error its excess shrink still leaves
-    in its band and above it (``ConditionedExcess.booked_rad``, :func:`shrunk_excesses`), where one ran; a new
-    dict."""
+    in its band and above it (``ConditionedExcess.booked_rad``, :func:`shrunk_excesses`), where one ran, or the
+    offset another axis's shrink measured brings to it (:func:`offset_shared_excesses`); a new dict."""
     return raised_uniformly(sigma, {a: ex.booked_rad for a, ex in excesses.items() if ex.booked_rad is not None})
 
 
@@ -1234,6 +1234,26 @@ def shrunk_excesses(records: dict, product: Product, settings: RestorationSettin
         if sh is not None:
             out[a] = sh
     return out
+
+
+def offset_shared_excesses(excesses: dict, product: Product) -> dict:
+    """``excesses`` (``{axis: ConditionedExcess}``) with ``shared_above_rad`` set where the scene's band offset
+    shrunk on one axis reaches another by the sun's split (:func:`restore.conditioned_excess.offset_shared_by_sun`,
+    :func:`restore.observability.sun_offset_shares` at the track's azimuth); as given when the product records no
+    sun or is not a push-broom acquisition, or when no axis booked an offset above the band. A new dict."""
+    from .conditioned_excess import offset_shared_by_sun
+    from .observability import sun_offset_shares, track_azimuth_deg
+
+    attrs = product.ds.attrs
+    above = {a: ex.above_error_rad for a, ex in excesses.items() if ex.above_error_rad}
+    if not above or "sun_azimuth_deg" not in attrs or attrs.get("acquisition", "pushbroom") != "pushbroom":
+        return dict(excesses)
+    variables = getattr(product.ds, "variables", {})
+    track = track_azimuth_deg(product.ds["ephemeris"].values if "ephemeris" in variables else None)
+    shares = {a: v for a, v in sun_offset_shares(float(attrs["sun_azimuth_deg"]), track).items() if a in excesses}
+    shared = offset_shared_by_sun(above, shares)
+    return {a: replace(ex, shared_above_rad=shared[a]) if shared.get(a, 0.0) > 0 else ex
+            for a, ex in excesses.items()}
 
 
 #: :func:`knowledge_error_prior` reads the knowledge's own ceiling where its filter passes at least this

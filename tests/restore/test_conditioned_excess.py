@@ -277,3 +277,47 @@ def test_a_band_change_far_beyond_what_the_shrink_takes_is_not_applied(monkeypat
     monkeypatch.setattr(ce, "_band_change", lambda *a, **k: right)
     fine = ce.shrunk_excess(est, f, np.full(f.size, PRIOR_PSD), NOISE, TAUS, DT, highpass_hz=HP, cutoff_hz=2 * CUTOFF)
     assert fine.shrunk and np.allclose(fine.increment, sh.increment)
+
+
+@pytest.mark.parametrize("sun_deg", [150.0, 20.0, 200.0, 100.0, 60.0])
+def test_an_offset_towards_the_sun_reaches_the_weaker_axis_by_its_share(sun_deg):
+    """An offset of power P towards the sun at Δ from the track puts P cos²Δ on pitch and P sin²Δ on roll: from
+    the axis with the larger share, the other gets exactly its own share (amplitude √P |sin Δ| or √P |cos Δ|);
+    from the smaller one nothing (never scaled up)."""
+    from restore.conditioned_excess import offset_shared_by_sun
+    from restore.observability import sun_offset_shares
+
+    p = 4e-14
+    shares = sun_offset_shares(sun_deg)
+    own = {a: float(np.sqrt(p * s)) for a, s in shares.items()}
+    strong, weak = sorted(shares, key=shares.get, reverse=True)
+    got = offset_shared_by_sun({strong: own[strong]}, shares)
+    assert got[weak] == pytest.approx(own[weak], rel=1e-12) and got[strong] == 0.0
+    assert offset_shared_by_sun({weak: own[weak]}, shares)[strong] == 0.0 or shares[weak] == shares[strong]
+
+
+def test_the_booked_error_takes_the_larger_of_the_two_estimates_above_the_band():
+    ex = ConditionedExcess(band_hz=(0.625, 1.75), excess_hz=[], max_ratio=1.8, excess_rms_rad=0.0,
+                           shrink_error_rad=0.0, above_error_rad=0.0)
+    assert ex.booked_rad == 0.0
+    got = ConditionedExcess(band_hz=(0.625, 1.75), excess_hz=[], max_ratio=1.8, excess_rms_rad=0.0,
+                            shared_above_rad=3e-8)
+    assert got.booked_rad == pytest.approx(3e-8)                 # not shrunk, but the offset reaches it
+    both = ConditionedExcess(band_hz=(0.625, 1.75), excess_hz=[0.625], max_ratio=4.0, excess_rms_rad=1e-7,
+                             shrink_error_rad=4e-8, above_error_rad=2e-8, shared_above_rad=3e-8)
+    assert both.booked_rad == pytest.approx(np.hypot(4e-8, 3e-8))
+    assert ConditionedExcess.from_dict(json.loads(json.dumps(both.as_dict()))) == both
+    assert ConditionedExcess(band_hz=(0.625, 1.75), excess_hz=[], max_ratio=1.0, excess_rms_rad=0.0).booked_rad is None
+
+
+def test_the_summary_line_says_what_an_axis_holds_of_the_offset_shared_to_it():
+    from reports.summary import conditioned_excess_line
+
+    pitch = ConditionedExcess(band_hz=(0.625, 1.75), excess_hz=[0.625], max_ratio=8.2, excess_rms_rad=2e-7,
+                              shrink_error_rad=4e-8, above_error_rad=1.2e-7)
+    roll = ConditionedExcess(band_hz=(0.625, 1.75), excess_hz=[], max_ratio=1.8, excess_rms_rad=0.0,
+                             shrink_error_rad=0.0, above_error_rad=0.0, shared_above_rad=6.8e-8)
+    ds = xr.Dataset({f"sigma_{a}": ("time", np.zeros(3), {"conditioned_excess": json.dumps(ex.as_dict())})
+                     for a, ex in (("pitch", pitch), ("roll", roll))}, attrs={"pixel_ifov_rad": IFOV})
+    line = conditioned_excess_line(ds, ["roll", "pitch"])
+    assert "split by the sun's direction" in line and "roll 0.0170 px" in line and "roll at" not in line

@@ -962,6 +962,39 @@ def test_an_estimate_over_its_conditioned_prior_is_shrunk_and_its_error_booked(t
         restoration_settings({"excess_shrink": 1})
 
 
+def test_the_offset_one_axis_shrinks_reaches_the_other_by_the_suns_split():
+    """stages.offset_shared_excesses: pitch's offset booked above the band (1.2e-7 rad) reaches roll, whose own test
+    found nothing, as √(¼ / ¾) of it under a sun 150° from a track along +x, and raise_by_excess_shrink books it on
+    roll's σ; with the track along +y (the sun 60° from it, roll's share the larger) nothing is shared, nor without
+    the sun's azimuth in the product."""
+    from types import SimpleNamespace
+    from restore import stages
+    from restore.conditioned_excess import ConditionedExcess
+    from restore.posterior import PosteriorSigma
+
+    excesses = {"pitch": ConditionedExcess(band_hz=(0.625, 1.75), excess_hz=[0.625], max_ratio=8.2,
+                                           excess_rms_rad=2e-7, shrink_error_rad=4e-8, above_error_rad=1.2e-7),
+                "roll": ConditionedExcess(band_hz=(0.625, 1.75), excess_hz=[], max_ratio=1.8, excess_rms_rad=0.0,
+                                          shrink_error_rad=0.0, above_error_rad=0.0)}
+
+    def product(sun=None, track_y=False):
+        attrs = {"knowledge_cutoff_hz": 2.0} | ({} if sun is None else {"sun_azimuth_deg": sun})
+        eph = np.array([[0.0, 0.0, 7e5], [0.0, 1e4, 7e5]] if track_y else [[0.0, 0.0, 7e5], [1e4, 0.0, 7e5]])
+        return SimpleNamespace(ds=xr.Dataset({"ephemeris": (("line", "xyz"), eph)}, attrs=attrs))
+
+    got = stages.offset_shared_excesses(excesses, product(150.0))
+    assert got["roll"].shared_above_rad == pytest.approx(1.2e-7 / np.sqrt(3.0))
+    assert got["pitch"].shared_above_rad is None and got["pitch"] == excesses["pitch"]
+    n = 50
+    ps = PosteriorSigma(sigma=np.full(n, 3e-8), noise_scale=1.0, samples=2, detrended_rms=3e-8,
+                        detrended_sigma=np.full(n, 3e-8))
+    up = stages.raise_by_excess_shrink({"roll": ps, "pitch": ps}, got)
+    np.testing.assert_allclose(up["roll"].sigma, np.hypot(3e-8, 1.2e-7 / np.sqrt(3.0)))
+    np.testing.assert_allclose(up["pitch"].sigma, np.hypot(3e-8, np.hypot(4e-8, 1.2e-7)))
+    assert stages.offset_shared_excesses(excesses, product(150.0, track_y=True)) == excesses
+    assert stages.offset_shared_excesses(excesses, product()) == excesses
+
+
 class _NoBar:
     def note(self, *_):
         pass
