@@ -865,8 +865,10 @@ def notch_peaks(D, valid, taus, dt: float, noise_std, centres, *, exclude_hz: fl
 #: and the width a second-order drift gives a line)
 CONTROL_OFFSETS_BINS = (-6.0, -4.0, 4.0, 6.0)
 #: :func:`blind_tones`: a notch's two tones (its blind frequency's, a line the pairs see inside it) lie at least this
-#: far apart [resolution bins] — the controls' nearest offset, the width a second-order drift gives a line
-TONE_SEPARATION_BINS = 4.0
+#: far apart [resolution bins] — the width a CMG harmonic's drift gives a line (1 % at 130 Hz over 1.6 s: 2.1
+#: bins); 4 bins (the controls' nearest offset) kept out a roll harmonic 0.18 Hz off forward_view's blind
+#: frequency on seed 2027, 2.8 bins from the yaw's line seen as roll: 0.094 px of roll left in the error
+TONE_SEPARATION_BINS = 2.5
 #: :func:`blind_tones`: the best candidates (by their drop) checked against their controls, in turn
 CANDIDATES_CHECKED = 3
 #: rounds of :func:`tone_sweep`'s refinement of a found tone's frequency and sweep rate

@@ -270,18 +270,12 @@ def test_a_line_inside_the_notch_that_one_pair_sees_is_found_and_restored(monkey
     assert notch_peaks(D, valid, taus, dt, np.full(3, 0.08 * IFOV), centres, exclude_hz=1.5 / (n * DT)) == []
 
 
-def test_a_line_the_pairs_see_inside_the_notch_does_not_take_the_blind_frequency_s_tone(monkeypatch):
-    """A 0.3 px line at 131.0 Hz, inside the 135.1 Hz notch but seen directly by the longer pairs, and a 0.35 px
-    tone exactly on 135.1 Hz, seen through the lags only (an unseen CMG's harmonic at 129.6 Hz beside a line on
-    the blind frequency): each gets its tone, and both are restored. With one tone per notch the line took it
-    and the blind tone stayed whole in the error (0.36 px on that scene)."""
-    from restore.integration.spectrum import notch_mask
-
-    f_line = 131.0
-    f = np.fft.rfftfreq(6000, DT)
-    assert notch_mask(f, np.array(TAUS), np.ones(3))[np.argmin(np.abs(f - f_line))]      # inside the notch
-    rng = np.random.default_rng(12)
+def _line_beside_the_blind_tone(f_line, seed):
+    """A 0.3 px line at ``f_line`` seen directly and a 0.35 px tone exactly on the 135.1 Hz blind frequency, seen
+    through the lags only, over the CMG: both must get their tone (within a bin) and both be restored (an error
+    under a quarter of the tone's RMS)."""
     n = 4000
+    rng = np.random.default_rng(seed)
     t = np.arange(n) * DT
     tone = 1.4e-6
 
@@ -295,6 +289,29 @@ def test_a_line_the_pairs_see_inside_the_notch_does_not_take_the_blind_frequency
     assert len(found) == 2
     np.testing.assert_allclose(found, (f_line, BLIND_HZ), atol=1.0 / (n * DT))
     assert _error_px(res.theta, theta(t)) < 0.25 * tone / np.sqrt(2) / IFOV
+
+
+def test_a_line_the_pairs_see_inside_the_notch_does_not_take_the_blind_frequency_s_tone():
+    """A 0.3 px line at 131.0 Hz, inside the 135.1 Hz notch but seen directly by the longer pairs, and a 0.35 px
+    tone exactly on 135.1 Hz, seen through the lags only (an unseen CMG's harmonic at 129.6 Hz beside a line on
+    the blind frequency): each gets its tone, and both are restored. With one tone per notch the line took it
+    and the blind tone stayed whole in the error (0.36 px on that scene)."""
+    from restore.integration.spectrum import notch_mask
+
+    f = np.fft.rfftfreq(6000, DT)
+    assert notch_mask(f, np.array(TAUS), np.ones(3))[np.argmin(np.abs(f - 131.0))]      # inside the notch
+    _line_beside_the_blind_tone(131.0, 12)
+
+
+def test_a_notch_s_two_tones_may_lie_under_four_bins_apart():
+    """A 0.3 px line 1.75 Hz (2.8 resolution bins) below the 135.1 Hz blind frequency, seen directly, and a 0.35 px
+    tone exactly on it, seen through the lags only (forward_view's seed 2027: a roll harmonic 0.18 Hz off its
+    blind frequency beside the yaw's line seen as roll): both get their tone (TONE_SEPARATION_BINS 2.5; with 4
+    the second was out of reach and stayed whole in the error, 0.25 px here, 0.094 px on that scene)."""
+    from restore.integration.wiener import TONE_SEPARATION_BINS
+
+    assert 2.5 <= TONE_SEPARATION_BINS < 1.75 * 4000 * DT
+    _line_beside_the_blind_tone(BLIND_HZ - 1.75, 21)
 
 
 @pytest.mark.slow
