@@ -3,7 +3,7 @@ import numpy as np
 
 from restore.integration import methods
 from restore.axis_integration import (explained_windows, integrate_axis, running_misfit, transient_blend,
-                                      transient_windows)
+                                      transient_windows, windows_beyond_noise)
 
 DT = 4e-4
 TAUS = (0.0074, 0.0148, 0.0222)
@@ -161,3 +161,20 @@ def test_the_estimate_without_prior_is_judged_where_the_prior_failed_not_over_th
     assert explained_windows(window, lsq, limit=2.0, judged=judged) == window
     lsq[100:200] = 3.0
     assert explained_windows(window, lsq, limit=2.0, judged=judged) == []
+
+
+def test_a_window_is_kept_only_where_the_estimate_without_prior_differs_by_more_than_its_own_noise():
+    """windows_beyond_noise: a difference of 3 × the least squares' noise RMS (a transient's signal) keeps its
+    window; a difference that is that noise (a false window: nothing but the least squares' own error) does not;
+    the window's mean (the offset no pair sees) does not count."""
+    rng = np.random.default_rng(3)
+    n = 2000
+    noise = rng.standard_normal((4, n)) * 1e-7
+    theta = np.zeros(n)
+    local = theta + 5e-6                                      # an offset alone: nothing
+    local[200:700] += noise[0, 200:700] * 1.0                 # noise-sized: a false window
+    t = np.arange(n) * DT
+    local[1000:1500] += 3e-7 * np.sqrt(2) * np.sin(2 * np.pi * 20 * t[1000:1500])   # 3 × the noise RMS
+    got = windows_beyond_noise([[200, 700], [1000, 1500], [1600, 1900]], theta, local, noise)
+    assert got == [[1000, 1500]]
+    assert windows_beyond_noise([[1000, 1500]], theta, local, noise, factor=4.0) == []
