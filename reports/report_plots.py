@@ -297,7 +297,8 @@ def draw_uncertainty(axs, d: dict, axis: str, *, ifov_rad: float):
     ax.fill_between(t, -sg, sg, color=C_REST, alpha=0.3, lw=0, label="±1σ predicted")
     if "error" in d:
         x, y = minmax_decimate(t, d["error"] / ifov_rad, 6000)
-        ax.plot(x, y, color=C_ERR, lw=0.5, label="actual error (restored − true)")
+        ax.plot(x, y, color=C_ERR, lw=0.5, label="actual error (restored − true)" if "yaw_seen_removed" not in d
+                else f"actual error less the yaw seen as {axis} ({d['yaw_seen_removed']:+.3f} × yaw)")
     if d["flagged"].any():
         tf = t[d["flagged"]]
         ax.plot(tf, np.zeros(tf.size), ls="none", marker="|", color="#000000", ms=8,

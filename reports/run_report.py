@@ -545,7 +545,10 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
         pg.figure(fig, f"uncertainty_{a}.png",
                   f"{a}: the restoration's predicted 1-σ per line (Monte Carlo through its own integration: prior "
                   f"and noise as it estimated them, the record's gaps, lags and weights)"
-                  + (" against the actual error; right, lines binned by predicted σ." if "error" in d else "."))
+                  + (" against the actual error" + (f", less the yaw seen as {a} (× {d['yaw_seen_removed']:+.3f}: no "
+                                                     "pair tells it apart off nadir; the error budget gives it)"
+                                                     if "yaw_seen_removed" in d else "")
+                     + "; right, lines binned by predicted σ." if "error" in d else "."))
     pg.para("Lines whose predicted σ exceeds restoration.max_sigma_px (\"auto\": 3 × the axis's median) are not "
             "restored and are counted as flagged, not as valid. A ratio near 1 says the error model holds; well "
             "above 1, the error comes from something the model does not hold (a blind frequency, an unmodelled "

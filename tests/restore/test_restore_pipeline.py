@@ -914,6 +914,41 @@ def test_lines_that_took_the_knowledge_s_band_are_counted_and_said_in_the_report
     assert "Knowledge fusion: roll 40 lines" in text and "pitch 0 lines" not in text
 
 
+def test_off_nadir_the_uncertainty_figure_compares_sigma_with_the_error_less_the_yaw_seen(tiny_restored, tmp_path):
+    """reports.report_data.uncertainty: with a material yaw coupling (restoration.nc's yaw_roll_coupling) the
+    actual error set against σ is the error less the yaw the axis books as its own, which no pair tells apart and σ
+    does not hold (the tiny run with a 40 Hz yaw added to truth and 0.3 × the yaw its knowledge misses added to the
+    restored roll gives back the tiny run's own error); the report's caption says so."""
+    from reports import report_data as D
+    from reports.metrics import truth_at
+    from reports.run_report import _Page, _uncertainty_section
+
+    d, _ = tiny_restored
+    before = D.uncertainty(D.load_run(d))["roll"]
+    run = tmp_path / "tilted"
+    run.mkdir()
+    for name in ("product.nc", "run.json"):
+        shutil.copy(d / name, run / name)
+    truth = xr.load_dataset(d / "truth.nc")
+    amp, c = 3e-6, 0.3
+    truth["yaw"].values[:] = truth["yaw"].values + amp * np.sin(2 * np.pi * 40.0 * truth["time"].values)
+    truth.to_netcdf(run / "truth.nc")
+    ds = xr.load_dataset(d / "restoration.nc")
+    # what a tilted restoration books as roll: c × the yaw its knowledge misses (reports.metrics.yaw_seen)
+    missed = truth_at(truth, "yaw", ds["time"].values) - ds["knowledge_yaw"].values
+    ds["roll"].values[:] = ds["roll"].values + c * missed
+    ds.attrs["yaw_roll_coupling"] = c
+    ds.to_netcdf(run / "restoration.nc")
+    after = D.uncertainty(D.load_run(run))["roll"]
+    assert after["yaw_seen_removed"] == pytest.approx(c) and "yaw_seen_removed" not in before
+    ok = np.isfinite(before["error"])
+    assert np.nanmax(np.abs(after["error"][ok] - before["error"][ok])) < 0.02 * c * amp
+    pg = _Page(tmp_path / "page")
+    (tmp_path / "page").mkdir()
+    _uncertainty_section(pg, D.load_run(run), {"ifov_rad": float(ds.attrs["pixel_ifov_rad"])})
+    assert "less the yaw seen as roll" in "\n".join(pg.parts)
+
+
 def test_an_estimate_over_its_conditioned_prior_is_shrunk_and_its_error_booked(tiny_restored):
     """stages.shrunk_excesses on a conditioned record (the tiny run's pitch record given a 3.2 s estimate, a flat
     prior and a 4 Hz knowledge; the tiny record itself is too short for the band): a sine 30 × the estimate's RMS
