@@ -14,7 +14,7 @@ from restore.correction import correct_bands, misregistration, weak_band_misregi
 from simsat.attitude import AttitudeSeries
 from simsat.units import AXES
 
-__all__ = ["error_stats", "attitude_errors", "truth_at", "error_split_by_band", "unobservable_split", "yaw_seen",
+__all__ = ["error_stats", "attitude_errors", "truth_at", "error_split_by_band", "unobservable_split", "yaw_seen", "axis_yaw_seen",
            "restoration_unobservable_split", "clear_line_fraction",
            "clear_line_coverage", "attitude_misregistration", "misregistration_floor"]
 
@@ -194,6 +194,16 @@ def yaw_seen(coupling: float, true_yaw, knowledge_yaw):
     if abs(float(coupling)) < YAW_COUPLING_REPORTED:
         return None
     return float(coupling) * (np.asarray(true_yaw, dtype=np.float64) - np.asarray(knowledge_yaw, dtype=np.float64))
+
+
+def axis_yaw_seen(restoration_attrs, attitude: dict, axis: str) -> tuple:
+    """``(coupling, yaw seen as axis per line [rad] or None)`` from restoration.nc's attributes (the axis's
+    :data:`YAW_COUPLING_ATTRS`) and a per-line attitude table holding ``true_yaw`` and ``knowledge_yaw``
+    (:func:`reports.report_data.attitude_table`); None without truth or below :data:`YAW_COUPLING_REPORTED`."""
+    c = float(dict(restoration_attrs).get(YAW_COUPLING_ATTRS.get(axis, ""), 0.0))
+    if "true_yaw" not in attitude or "knowledge_yaw" not in attitude:
+        return c, None
+    return c, yaw_seen(c, attitude["true_yaw"], attitude["knowledge_yaw"])
 
 
 def attitude_errors(restoration, truth, *, axes=AXES) -> dict:

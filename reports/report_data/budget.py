@@ -10,7 +10,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from restore.observability import record_trend
-from reports.metrics import YAW_COUPLING_ATTRS, error_stats, unobservable_split, yaw_seen
+from reports.metrics import axis_yaw_seen, error_stats, unobservable_split
 from restore.stages import local_errors as stages_local_errors
 from restore.observability import record_observability
 from simsat.units import AXES
@@ -485,10 +485,7 @@ class _AxisBudget:
 
     def _yaw_seen(self):
         """With truth and a material coupling: (coupling, yaw seen as this axis per line [rad]); else (c, None)."""
-        c = float(self.run.restoration.attrs.get(YAW_COUPLING_ATTRS.get(self.a, ""), 0.0))
-        if "true_yaw" not in self.att:
-            return c, None
-        return c, yaw_seen(c, self.att["true_yaw"], self.att["knowledge_yaw"])
+        return axis_yaw_seen(self.run.restoration.attrs, self.att, self.a)
 
     def yaw_coupling_rows(self, total) -> list:
         """Tilted, with truth: the part of the pitch (roll) error that is yaw seen as pitch (roll), and the rest."""

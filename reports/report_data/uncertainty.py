@@ -5,7 +5,7 @@ import json
 
 import numpy as np
 
-from reports.metrics import YAW_COUPLING_ATTRS, yaw_seen
+from reports.metrics import axis_yaw_seen
 
 from .headline import attitude_table, restored_axes
 from .loading import RunData
@@ -38,14 +38,6 @@ def sigma_calibration(sigma, error, *, bins: int = 8) -> dict:
             act.append(np.sqrt(np.mean(e[m] ** 2)))
             cnt.append(int(m.sum()))
     return {"predicted": np.array(pred), "actual": np.array(act), "lines": np.array(cnt, dtype=int)}
-
-
-def _yaw_seen_on(rest, att: dict, axis: str):
-    """With truth and a material yaw coupling of ``axis`` (off nadir): the yaw it books as its own per line [rad]
-    (:func:`reports.metrics.yaw_seen`); None otherwise."""
-    if axis not in YAW_COUPLING_ATTRS or "true_yaw" not in att or "knowledge_yaw" not in att:
-        return None
-    return yaw_seen(float(rest.attrs.get(YAW_COUPLING_ATTRS[axis], 0.0)), att["true_yaw"], att["knowledge_yaw"])
 
 
 def uncertainty(run: RunData) -> dict:
@@ -84,11 +76,11 @@ def uncertainty(run: RunData) -> dict:
              if f"knowledge_fusion_weight_{a}" in rest else 0}
         if f"error_{a}" in att:
             e = np.where(valid, att[f"error_{a}"], np.nan)
-            seen = _yaw_seen_on(rest, att, a)
+            coupling, seen = axis_yaw_seen(rest.attrs, att, a)
             if seen is not None:     # off nadir: the yaw this axis books as its own, which no pair can tell apart
                 e = e - seen
                 e = e - np.nanmean(e) if np.isfinite(e).any() else e
-                d["yaw_seen_removed"] = float(rest.attrs.get(YAW_COUPLING_ATTRS[a], 0.0))
+                d["yaw_seen_removed"] = coupling
             d["error"] = e
             d["actual_rms"] = float(np.sqrt(np.nanmean(e ** 2))) if valid.any() else float("nan")
             d["ratio"] = d["actual_rms"] / d["predicted_rms"] if d["predicted_rms"] > 0 else float("nan")
