@@ -168,6 +168,11 @@ MEANING = {
     "interpolation, counted only where at least ½), so where the attitude is quiet and the knowledge noisy the "
     "images' noise no longer passes; then predict σ again. On by default; a product that does not record its "
     "knowledge's filter and noise, or a method with no spectral prior, is not conditioned",
+    "restoration.knowledge_band_noise": "where an axis's prior is conditioned on the knowledge, measure each "
+        "pair's matching noise between the high-pass and 0.9 × the knowledge's cut-off from its differentials "
+        "against the record's own draws (a band's error common to a line's points moves the pairs like an "
+        "attitude, so no residual shows it) and integrate again weighing each pair by that colour where it "
+        "exceeds the record's own (restore.knowledge_band_noise; σ predicted again)",
     "restoration.excess_shrink": "where an axis's prior is conditioned on the knowledge, test its estimate's "
     "power per bin between the high-pass and 0.9 × the knowledge's cut-off (strong lines above fitted out) "
     "against what a Wiener output of that prior can hold, the prior allowed 10 % of the attitude for the "

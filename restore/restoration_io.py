@@ -246,7 +246,9 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
                                             "highpass_hz": rec.highpass_hz, "line_period_s": rec.line_period_s,
                                             "unobservable_rms_rad": rec.unobservable_rms_rad,
                                             "floor_rms_rad": rec.floor_rms_rad, "selection": rec.selection,
-                                            "knowledge_conditioned": bool(rec.knowledge_conditioned)}
+                                            "knowledge_conditioned": bool(rec.knowledge_conditioned),
+                                            "knowledge_band_hz": (None if rec.knowledge_band_hz is None else
+                                                                  [float(v) for v in rec.knowledge_band_hz])}
                                         for a, rec in res.integration.items()}, sort_keys=True)}
     for a in AXES:
         attrs[f"coverage_{a}"] = res.coverage[a]
@@ -375,7 +377,9 @@ def _records_from(ds, info: dict) -> dict:
             previous=_values(ds, f"previous_estimate_{a}"),
             unobservable_rms_rad=float(meta.get("unobservable_rms_rad", float("nan"))),
             floor_rms_rad=float(meta.get("floor_rms_rad", float("nan"))), selection=meta.get("selection"),
-            knowledge_conditioned=bool(meta.get("knowledge_conditioned", False)))
+            knowledge_conditioned=bool(meta.get("knowledge_conditioned", False)),
+            knowledge_band_hz=(None if meta.get("knowledge_band_hz") is None
+                               else tuple(float(v) for v in meta["knowledge_band_hz"])))
     return out
 
 

@@ -135,6 +135,7 @@ class Restorer:
                                                                 bar)
             records, estimate, sigma = self.condition_on_knowledge(product, knowledge, records, estimate, sigma,
                                                                     timings, bar)
+            records, estimate, sigma = self.weigh_knowledge_band(product, records, estimate, sigma, timings, bar)
             records, estimate, excesses = self.shrink_excess(product, records, estimate, bar)
             s = self.settings
             sigma = self.raise_by_local_error(sigma, records, pairs, product, timings, bar)
@@ -408,6 +409,29 @@ class Restorer:
             _take_records(records, estimate, done)
             sigma = {**sigma, **stages.predicted_sigma(done, product, s)}
         timings["knowledge_conditioning_s"] = _time.perf_counter() - t
+        return records, estimate, sigma
+
+    def weigh_knowledge_band(self, product: Product, records: dict, estimate: dict, sigma: dict, timings: dict,
+                             bar) -> tuple:
+        """With ``knowledge_band_noise``: integrate each knowledge-conditioned axis again, each pair weighed by the
+        noise its differentials show in the knowledge's band (:func:`stages.knowledge_band_weighted`), then
+        predict σ of those axes again. Returns (records, estimate, sigma), new where an axis was weighted."""
+        if not self.settings.knowledge_band_noise or not sigma:
+            return records, estimate, sigma
+        t = _time.perf_counter()
+        weighted, found = {}, {}
+        for a, rec in records.items():
+            out = stages.knowledge_band_weighted(rec, product, self.settings)
+            if out is not None:
+                weighted[a], found[a] = out
+        if weighted:
+            bar.note("the pairs' differentials in the AOCS knowledge's band hold up to "
+                     + ", ".join(f"{v:.1f} × ({a})" for a, v in found.items())
+                     + " their white matching noise: integrating again, weighed by it")
+            records, estimate = dict(records), dict(estimate)
+            _take_records(records, estimate, weighted)
+            sigma = {**sigma, **stages.predicted_sigma(weighted, product, self.settings)}
+        timings["knowledge_band_noise_s"] = _time.perf_counter() - t
         return records, estimate, sigma
 
     def shrink_excess(self, product: Product, records: dict, estimate: dict, bar) -> tuple:

@@ -87,6 +87,9 @@ class IntegrationRecord:
     #: the knowledge's response counts (0 elsewhere) [rad²/Hz, two-sided]; what the knowledge's model error scales
     #: with (:data:`restore.conditioned_excess.KNOWLEDGE_MODEL_ERROR`). Not written to restoration.nc
     conditioned_attitude_psd: np.ndarray | None = None
+    #: the band [Hz] where the noise colour the MAP weighs with was read from the differentials themselves
+    #: (:mod:`restore.knowledge_band_noise`); the σ draws' noise takes that colour there. None: not read
+    knowledge_band_hz: tuple | None = None
 
     def rerun(self, diffs=None, *, frozen: bool = True, lags=None, first_stage_gcv: bool = True) -> np.ndarray:
         """Integrate other differentials (true ones, noisy ones) through this axis's integration.

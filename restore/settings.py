@@ -68,6 +68,7 @@ class RestorationSettings:
     knowledge_prior: bool = True
     knowledge_conditioning: bool = True
     excess_shrink: bool = True
+    knowledge_band_noise: bool = True
     rematch: int | str = "auto"
     rematch_search: tuple = (2, 2)
     max_sigma_px: float | str = "auto"
@@ -166,6 +167,7 @@ def restoration_settings(sec: Section | dict | None) -> RestorationSettings:
     s.knowledge_prior = sec.boolean("knowledge_prior", s.knowledge_prior)
     s.knowledge_conditioning = sec.boolean("knowledge_conditioning", s.knowledge_conditioning)
     s.excess_shrink = sec.boolean("excess_shrink", s.excess_shrink)
+    s.knowledge_band_noise = sec.boolean("knowledge_band_noise", s.knowledge_band_noise)
     s.noise_colour_weighting = sec.boolean("noise_colour_weighting", s.noise_colour_weighting)
     s.knowledge_noise_floor = sec.boolean("knowledge_noise_floor", s.knowledge_noise_floor)
     s.knowledge_smoothing = sec.boolean("knowledge_smoothing", s.knowledge_smoothing)

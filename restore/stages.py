@@ -52,7 +52,7 @@ from .synthesis import (
 
 __all__ = ["visible_pairs", "auto_pairs", "resolve_pairs", "pilot_shift", "Candidates", "shared_columns", "select_candidates", "match_candidates",
            "match_pair", "valid_fraction", "line_rate_px", "rematch_passes", "estimate_change_px", "rematch_moved", "rematch_pairs", "synthesise_pair", "line_lag", "PairDifferentials", "pair_differentials",
-           "knowledge_ceilings", "knowledge_error_prior", "conditioned_excesses", "shrunk_excesses", "offset_shared_excesses", "raised_uniformly", "raise_by_excess_shrink", "knowledge_filter_errors", "knowledge_latency_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_latency", "advanced_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
+           "knowledge_ceilings", "knowledge_error_prior", "conditioned_excesses", "shrunk_excesses", "offset_shared_excesses", "raised_uniformly", "raise_by_excess_shrink", "knowledge_filter_errors", "knowledge_latency_errors", "raise_by_knowledge_filter", "knowledge_proves_excess", "knowledge_crossover_hz", "yaw_pitch_coupling", "yaw_coupling", "integrate_differentials", "noise_share_of_excess", "excess_the_knowledge_proves_noise", "colour_weighted", "dephased_knowledge", "knowledge_latency", "advanced_knowledge", "knowledge_smoothings", "knowledge_smoothing_correction", "undo_exposure", "predicted_sigma", "knowledge_conditioned", "knowledge_band_weighted", "band_noise", "raise_by_local_error", "raise_by_knowledge_check", "local_errors", "sigma_limit", "flag_uncertain", "remove_mean", "restored_from", "anchor_on_star_tracker", "anchoring_sigma", "add_anchoring_sigma", "check_coverage", "correct_images",
            "attitude_series"]
 
 
@@ -1045,6 +1045,40 @@ def knowledge_conditioned(record: IntegrationRecord, sigma, product: Product, kn
                   knowledge_conditioned=True,
                   conditioned_attitude_psd=np.where(np.abs(cond.mean_filter) > 0, cond.psd_theta, 0.0))
     return replace(new, increment=new.rerun())   # the method's frozen options, with the conditional prior
+
+
+def knowledge_band_weighted(record: IntegrationRecord, product: Product, settings: RestorationSettings
+                            ) -> tuple[IntegrationRecord, float] | None:
+    """A knowledge-conditioned axis integrated again, each pair's noise weighed by the colour its differentials
+    show in the knowledge's band (:mod:`restore.knowledge_band_noise`), and the largest factor found.
+
+    The band runs from the record's high-pass to :data:`restore.conditioned_excess.BAND_FRACTION` of the
+    knowledge's cut-off (its filter's flat part, where the conditioned prior holds); there the colour replaces
+    the record's own where larger, and the new record's ``knowledge_band_hz`` says where, so that σ's draws
+    simulate that noise (:func:`restore.posterior.posterior_sigma`). None where it does not apply (``knowledge_band_noise`` off, a record not
+    conditioned on the knowledge, a method that cannot weigh by a colour, no cut-off recorded) or where the
+    differentials show no excess.
+    """
+    from .conditioned_excess import BAND_FRACTION
+    from .knowledge_band_noise import knowledge_band_colour
+
+    cutoff = product.ds.attrs.get("knowledge_cutoff_hz")
+    if not settings.knowledge_band_noise or not record.knowledge_conditioned or record.spectrum is None \
+            or cutoff is None or not integration_method(record.method).noise_colour:
+        return None
+    band = (float(record.highpass_hz), BAND_FRACTION * float(cutoff))
+    colour = knowledge_band_colour(record, band, samples=max(int(settings.posterior_samples), 2),
+                                   seed=AXES.index(record.axis))
+    if colour is None or not np.any(colour > 1.0):
+        return None
+    n = np.asarray(record.diffs).shape[1]
+    f = np.fft.rfftfreq(n, record.line_period_s)
+    own = record.spectrum.noise_colour
+    if own is not None:
+        colour = np.maximum(colour, np.array([np.interp(f, np.asarray(own[0], dtype=np.float64), c)
+                                              for c in np.atleast_2d(np.asarray(own[1], dtype=np.float64))]))
+    weighted = replace(record, spectrum=replace(record.spectrum, noise_colour=(f, colour)), knowledge_band_hz=band)
+    return replace(weighted, increment=weighted.rerun()), float(np.max(colour))
 
 
 def raise_by_local_error(sigma: dict, records: dict, pairs: list, product: Product,

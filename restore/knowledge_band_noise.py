@@ -1,0 +1,121 @@
+"""The matching noise the pairs' differentials show in the AOCS knowledge's band, and the weight it leaves them.
+
+A band's own matching error common to a line's points moves every pair the
+way an attitude does (the scene's band offset: spectral differences of the
+bands in shading and shadows, :mod:`restore.observability`), so no fit
+residual shows it: the estimate absorbs it. Where the record's prior is
+conditioned on the AOCS knowledge, the differentials themselves do: there
+the integration restores ``e' = θ − k − E[e | k]``, whose prior ``V`` the
+knowledge's noise model fixes, and pair ``j``'s differential holds
+``|G_j|² V`` of it plus its noise. Its power against the same record's
+Monte Carlo draws — the prior through the pair (``A``) plus the white noise
+of the integration's model (``N``) — measures the noise's colour there:
+
+    c = 1 + (real / simulated − 1) × simulated / N,
+
+the factor on the white noise that makes the draws' differentials as large
+as the real ones (both Hann-tapered, mean removed, averaged over the bands
+of :func:`restore.posterior._band_edges`; 1 where the real ones are no
+larger). Weighing the MAP by it (:func:`restore.stages.knowledge_band_weighted`)
+lets the knowledge-conditioned prior, not the offset, decide that band:
+measured offline on rendered products (forty-third session), pitch 0.0286 →
+0.0245 px on an unseen quiet scene, 0.0556 → 0.0529 under a causal 4 Hz
+knowledge, 0.0214 → 0.0209 on the suite's notch_lines; nothing moved where
+the differentials show no excess.
+
+Outside the conditioned band the differentials hold the attitude itself,
+whose prior the data set: there nothing is measured (colour 1). The colour
+combines with the one the record already carries (its residual's, which
+sees the part of the noise the pairs disagree on) by the larger of the two:
+both measure the same noise against white.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal.windows import hann
+from scipy.stats import chi2
+
+from .posterior import _band_edges, draw_differentials
+
+__all__ = ["COLOUR_LIMIT", "MIN_NOISE_SHARE", "HANN_ENBW", "CONFIDENCE", "tapered_band_power", "colour_from_differentials",
+           "knowledge_band_colour"]
+
+#: the largest factor on the white noise taken (a band whose real power is dominated by something else)
+COLOUR_LIMIT = 64.0
+#: equivalent noise bandwidth of the Hann taper [bins]
+HANN_ENBW = 1.5
+#: the real power is read at the lower end of this one-sided confidence (its χ² scatter divided out): a band whose
+#: noise is white passes for coloured in no more than 1 − CONFIDENCE of the records, by little when it does
+CONFIDENCE = 0.9
+#: the noise's share of the draws' power is taken as at least this (the excess is divided by it: a band where the
+#: draws are all attitude cannot tell how much of an excess is the noise's, and would multiply it without bound)
+MIN_NOISE_SHARE = 0.25
+
+
+def tapered_band_power(x, edges: list) -> np.ndarray:
+    """Mean Hann-tapered periodogram of each row of ``x`` (pair, line) in the bands ``edges`` (pair, band).
+
+    NaN samples count as the row's mean (removed first); the taper keeps a
+    strong line outside a band from leaking into it through a rectangular
+    window's sidelobes.
+    """
+    x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+    ok = np.isfinite(x)
+    mean = np.where(ok, x, 0.0).sum(axis=1) / np.maximum(ok.sum(axis=1), 1)
+    y = np.where(ok, x - mean[:, None], 0.0) * hann(x.shape[1], sym=False)[None, :]
+    per = np.abs(np.fft.rfft(y, axis=-1)) ** 2
+    return np.array([[per[j, a:b].mean() for a, b in zip(edges[:-1], edges[1:])] for j in range(x.shape[0])])
+
+
+def colour_from_differentials(real, simulated, noise, edges: list, n: int, in_band, *,
+                              limit: float = COLOUR_LIMIT, confidence: float | None = CONFIDENCE) -> np.ndarray:
+    """Per pair and frequency of ``rfftfreq(n)``: the factor on the white noise that makes the draws'
+    differentials as large as the real ones, in the bands of ``edges`` that lie wholly inside ``in_band``.
+
+    ``real``, ``simulated`` (mean over the draws) and ``noise`` (the draws' noise alone) are band powers
+    (pair, band) as :func:`tapered_band_power` gives them; ``in_band`` a boolean mask over ``rfftfreq(n)``.
+    ``c = 1 + (real / q − simulated) / noise`` (the noise's share of the draws taken as at least
+    :data:`MIN_NOISE_SHARE`; ``q`` the ``confidence`` quantile of the real power's χ² scatter over its
+    mean, so that the factor is a lower bound; 1 with ``confidence=None``), between 1 and ``limit``, interpolated in log-log between the inside bands'
+    centres and held flat from the outermost ones to the ends of ``in_band``; 1 outside ``in_band``.
+    """
+    real, sim, noise = (np.asarray(v, dtype=np.float64) for v in (real, simulated, noise))
+    mask = np.asarray(in_band, dtype=bool)
+    bounds = list(zip(edges[:-1], edges[1:]))
+    inside = np.array([bool(mask[a:b].all()) for a, b in bounds])
+    # the real power's own scatter: a band of b tapered bins is worth b / ENBW independent ones, χ² of 2 b / ENBW
+    dof = np.array([2.0 * max(b - a, 1) / HANN_ENBW for a, b in bounds])
+    q = np.ones(dof.size) if confidence is None else chi2.ppf(confidence, dof) / dof
+    with np.errstate(divide="ignore", invalid="ignore"):
+        floor = np.maximum(noise, MIN_NOISE_SHARE * sim)
+        c = 1.0 + np.maximum(real / q[None, :] - sim, 0.0) / floor
+    c = np.clip(np.where(np.isfinite(c), c, 1.0), 1.0, limit)[:, inside]
+    if c.shape[1] == 0:
+        return np.ones((real.shape[0], n // 2 + 1))
+    # in log-log between the inside bands' centres, held flat from the outermost ones to the band's ends (the
+    # bands that straddle them are not read, and their 1 would pull the factor down at the band's edges)
+    idx = np.arange(n // 2 + 1)
+    centres = np.log([np.exp(np.mean(np.log(np.arange(a, b)))) for (a, b), ok in
+                      zip(zip(edges[:-1], edges[1:]), inside) if ok])
+    on_bins = np.array([np.exp(np.interp(np.log(np.maximum(idx, 1)), centres, np.log(r))) for r in c])
+    return np.where(mask[None, :], on_bins, 1.0)
+
+
+def knowledge_band_colour(record, band_hz, *, samples: int = 8, seed: int = 0) -> np.ndarray | None:
+    """The noise's colour (pair, ``rfftfreq(lines, Δt)``) the record's differentials show in ``band_hz``
+    against its own draws (module docstring); None where no band of the record lies inside it or the record
+    cannot be drawn from (no prior)."""
+    if getattr(record, "spectrum", None) is None:
+        return None
+    d = np.asarray(record.diffs, dtype=np.float64)
+    n, dt = d.shape[1], float(record.line_period_s)
+    f = np.fft.rfftfreq(n, dt)
+    lo, hi = float(band_hz[0]), float(band_hz[1])
+    in_band = (f >= lo) & (f <= hi)
+    edges = _band_edges(n)
+    if not any(in_band[a:b].all() for a, b in zip(edges[:-1], edges[1:])):
+        return None
+    sims, noises = draw_differentials(record, samples=samples, seed=seed)
+    simulated = np.mean([tapered_band_power(s, edges) for s in sims], axis=0)
+    noise = np.mean([tapered_band_power(z, edges) for z in noises], axis=0)
+    return colour_from_differentials(tapered_band_power(d, edges), simulated, noise, edges, n, in_band)
