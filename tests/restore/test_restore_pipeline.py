@@ -379,6 +379,30 @@ def test_a_blind_frequency_tone_round_trips_through_the_file(tiny_restored, tmp_
     assert back.integration["pitch"].spectrum.tones == ([135.1351], 3.0e-6, 4, [0.78])
 
 
+def test_the_knowledge_band_a_colour_was_read_in_round_trips_through_the_file(tiny_restored, tmp_path):
+    """``knowledge_band_hz`` (where the MAP's noise colour was read from the differentials, which σ's draws take)
+    is written with the integration and read back; the tiny run reads none (its differentials show no excess
+    in its knowledge's band), and the stage says so with None."""
+    import copy
+    from dataclasses import replace
+
+    from restore import stages
+    from restore.restoration_io import restoration_dataset, result_from_dataset
+    from simsat.product import read_product
+
+    d, res = tiny_restored
+    assert all(rec.knowledge_band_hz is None for rec in res.integration.values())
+    assert all(stages.knowledge_band_weighted(rec, read_product(d), res.settings) is None
+               for rec in res.integration.values())
+    res = copy.deepcopy(res)
+    res.integration["pitch"] = replace(res.integration["pitch"], knowledge_band_hz=(2.0, 9.0))
+    path = tmp_path / "restoration.nc"
+    restoration_dataset(res).to_netcdf(path)
+    back = result_from_dataset(xr.load_dataset(path), path)
+    assert back.integration["pitch"].knowledge_band_hz == (2.0, 9.0)
+    assert back.integration["roll"].knowledge_band_hz is None
+
+
 def test_every_restored_line_has_a_predicted_sigma_and_flagged_lines_are_not_restored(tiny_restored):
     d, res = tiny_restored
     ds = xr.load_dataset(d / "restoration.nc")
