@@ -71,6 +71,33 @@ def transient_line(restoration, axes) -> str | None:
             + "; ".join(found))
 
 
+def knowledge_band_noise_line(restoration, axes) -> str | None:
+    """The axes whose pairs' matching noise was read from their differentials in the AOCS knowledge's band, and
+    weighed by (``knowledge_band_hz`` of restoration.nc's ``integration`` record, the largest factor of
+    ``prior_noise_colour_<axis>`` there; :mod:`restore.knowledge_band_noise`), or None."""
+    import numpy as np
+
+    info = _integration_info(restoration)
+    if info is None:
+        return None
+    found = []
+    for a in axes:
+        band = (info.get(a) or {}).get("knowledge_band_hz")
+        col = restoration.variables.get(f"prior_noise_colour_{a}")
+        if not band or col is None:
+            continue
+        f = np.asarray(restoration[f"colour_freq_{a}"].values, dtype=np.float64)
+        inside = (f >= float(band[0])) & (f <= float(band[1]))
+        values = np.asarray(col.values, dtype=np.float64)[:, inside]
+        if values.size and np.isfinite(values).any():
+            found.append(f"{a} up to {np.nanmax(values):.1f} × the white noise at {float(band[0]):.2f}–"
+                         f"{float(band[1]):.2f} Hz")
+    if not found:
+        return None
+    return ("  the pairs' differentials in the AOCS knowledge's band showed matching noise no residual can "
+            "(the scene's band offset moves them like an attitude); weighed by it, σ counts it: " + "; ".join(found))
+
+
 def notch_level_line(restoration, axes) -> str | None:
     """The notches whose prior the integration took from their own level (``notch_levels`` in the options of
     restoration.nc's ``integration`` record: :func:`restore.axis_integration._notch_prior`), with the RMS that
@@ -523,7 +550,8 @@ def run_summary(run_dir: str | Path, *, report_path: str | Path | None = None) -
                 knowledge_filter_line_of_run(run, axes_r)):
         if lag:
             lines.append(lag)
-    for notch in (notch_level_line(run.restoration, axes_r), notch_continuum_line_of_run(run, axes_r)):
+    for notch in (notch_level_line(run.restoration, axes_r), notch_continuum_line_of_run(run, axes_r),
+                  knowledge_band_noise_line(run.restoration, axes_r)):
         if notch:
             lines.append(notch)
     disagreement = knowledge_check_line(run.restoration, axes_r,

@@ -175,3 +175,25 @@ def test_the_sigma_of_a_weighted_record_draws_the_noise_it_was_weighed_for():
     f = np.fft.rfftfreq(N, DT)
     assert np.all(col[:, f > BAND[1]] == 1.0) and np.max(col[:, f <= BAND[1]]) > 1.0
     assert knowledge_band_draw_colour(dataclasses.replace(new, knowledge_band_hz=None), N, DT) is None
+
+
+def test_the_summary_says_which_axes_and_how_much():
+    import json
+
+    import xarray as xr
+
+    from reports.summary import knowledge_band_noise_line
+
+    f = np.linspace(0.0, 20.0, 41)
+    col = np.ones((3, f.size))
+    col[1, (f >= 2.0) & (f <= 3.0)] = 12.5
+    col[0, f > 10.0] = 99.0                             # outside the band: not the band's
+    info = {"pitch": {"knowledge_band_hz": [0.8, 3.6]}, "roll": {"knowledge_band_hz": None}}
+    ds = xr.Dataset({"prior_noise_colour_pitch": (("pair", "colour_freq_pitch"), col),
+                     "prior_noise_colour_roll": (("pair", "colour_freq_roll"), col)},
+                    coords={"colour_freq_pitch": f, "colour_freq_roll": f},
+                    attrs={"integration": json.dumps(info)})
+    line = knowledge_band_noise_line(ds, ["roll", "pitch"])
+    assert line is not None and "pitch up to 12.5 × the white noise at 0.80–3.60 Hz" in line and "roll" not in line
+    assert knowledge_band_noise_line(ds, ["roll"]) is None
+    assert knowledge_band_noise_line(xr.Dataset(attrs={"integration": "not json"}), ["pitch"]) is None
