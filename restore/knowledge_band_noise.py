@@ -11,17 +11,24 @@ knowledge's noise model fixes, and pair ``j``'s differential holds
 Monte Carlo draws — the prior through the pair (``A``) plus the white noise
 of the integration's model (``N``) — measures the noise's colour there:
 
-    c = 1 + (real / simulated − 1) × simulated / N,
+    c = 1 + (real / q − simulated) / N,
 
 the factor on the white noise that makes the draws' differentials as large
 as the real ones (both Hann-tapered, mean removed, averaged over the bands
-of :func:`restore.posterior._band_edges`; 1 where the real ones are no
-larger). Weighing the MAP by it (:func:`restore.stages.knowledge_band_weighted`)
-lets the knowledge-conditioned prior, not the offset, decide that band:
-measured offline on rendered products (forty-third session), pitch 0.0286 →
-0.0245 px on an unseen quiet scene, 0.0556 → 0.0529 under a causal 4 Hz
-knowledge, 0.0214 → 0.0209 on the suite's notch_lines; nothing moved where
-the differentials show no excess.
+of :func:`restore.posterior._band_edges`; ``q`` below; 1 where the real
+ones are no larger). Weighing the MAP by it (:func:`restore.stages.knowledge_band_weighted`)
+lets the knowledge-conditioned prior, not the offset, decide that band, and
+σ's draws simulate that noise there. Measured on unseen rendered products
+(forty-third session, roll / pitch px outside the unobservable part):
+a quiet scene 0.0240 / 0.0286 → 0.0226 / 0.0268, a causal 4 Hz knowledge's
+0.0290 / 0.0407 → 0.0295 / 0.0350 and 0.0305 / 0.0549 → 0.0305 / 0.0530,
+notch lines 0.0261 / 0.0327 → 0.0257 / 0.0320; nothing moved where the
+differentials show no excess (a noisy knowledge's).
+
+The factor is read as a lower bound: ``q`` is the :data:`CONFIDENCE` point
+of the real power's χ² scatter over its mean. Unbiased (``q = 1``), a white
+band read up to 4 × where the draws were mostly attitude, and a false colour
+weighs good data down; as a lower bound a 40 × slow noise reads 0.2–0.7 of it.
 
 Outside the conditioned band the differentials hold the attitude itself,
 whose prior the data set: there nothing is measured (colour 1). The colour
