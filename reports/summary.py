@@ -95,7 +95,7 @@ def knowledge_band_noise_line(restoration, axes) -> str | None:
     if not found:
         return None
     return ("  the pairs' differentials in the AOCS knowledge's band showed matching noise no residual can "
-            "(the scene's band offset moves them like an attitude); weighed by it, σ counts it: " + "; ".join(found))
+            "(the scene's band offset moves them like an attitude), and the axis was integrated again weighed by it: " + "; ".join(found))
 
 
 def notch_level_line(restoration, axes) -> str | None:

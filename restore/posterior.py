@@ -82,7 +82,7 @@ from .synthesis import highpass_gain, highpass_nan
 
 __all__ = ["PosteriorSigma", "posterior_sigma", "noise_per_line", "prior_draw", "simulated_differentials",
            "fit_residual_rms", "fit_residuals", "band_power", "noise_colour_from_check", "noise_colour_estimate",
-           "coloured_noise", "draw_differentials", "knowledge_band_draw_colour",
+           "coloured_noise", "draw_differentials",
            "knowledge_noise_below", "draw_psd", "pair_bands", "SharedBandNoise", "shared_band_noise",
            "correlated_noise",
            "detrended", "detrended_rms", "detrended_rms_over", "local_error_sigma", "larger_sigma",
@@ -620,12 +620,6 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
         if shared is not None:   # the residual of the model with shared bands is smaller: compare with that one
             _, sim = run(None, samples, True, shared)
         estimate = noise_colour_estimate(real, np.mean(sim, axis=0), edges, n, draws=len(sim))
-    band_colour = knowledge_band_draw_colour(record, n, dt)
-    if band_colour is not None:
-        # the noise the differentials showed in the knowledge's band, which the MAP was weighed for: the draws
-        # simulate it there (the residual's check cannot see it: it moves the pairs like an attitude)
-        estimate = band_colour if estimate is None else np.maximum(estimate, band_colour)
-    if check_noise or band_colour is not None:
         errs, _ = run(estimate, samples, False, shared)
     kn = knowledge_error_moments(record, np.isfinite(errs).any(axis=0), krng,
                                  knowledge_noise_rad=knowledge_noise_rad, knowledge_rate_hz=knowledge_rate_hz,
@@ -679,21 +673,6 @@ def draw_psd(freq, psd, knowledge_noise_rad: float = 0.0, knowledge_rate_hz: flo
         return psd
     return np.maximum(psd, knowledge_noise_floor(freq, rate_hz=float(knowledge_rate_hz),
                                                  noise_rad=float(knowledge_noise_rad)))
-
-
-def knowledge_band_draw_colour(record, n: int, dt: float) -> np.ndarray | None:
-    """The record's noise colour (pair, ``rfftfreq(n, dt)``) inside its ``knowledge_band_hz``, 1 outside; None
-    where the record did not read one there (:mod:`restore.knowledge_band_noise`)."""
-    band = getattr(record, "knowledge_band_hz", None)
-    spec = getattr(record, "spectrum", None)
-    if band is None or spec is None or spec.noise_colour is None:
-        return None
-    f = np.fft.rfftfreq(n, dt)
-    fc, col = spec.noise_colour
-    col = np.array([np.interp(f, np.asarray(fc, dtype=np.float64), c)
-                    for c in np.atleast_2d(np.asarray(col, dtype=np.float64))])
-    inside = (f >= float(band[0])) & (f <= float(band[1]))
-    return np.where(inside[None, :], np.maximum(col, 1.0), 1.0)
 
 
 def draw_differentials(record, *, samples: int = 8, seed: int = 0) -> tuple[list, list]:

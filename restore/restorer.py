@@ -415,7 +415,7 @@ class Restorer:
                              bar) -> tuple:
         """With ``knowledge_band_noise``: integrate each knowledge-conditioned axis again, each pair weighed by the
         noise its differentials show in the knowledge's band (:func:`stages.knowledge_band_weighted`), then
-        predict σ of those axes again. Returns (records, estimate, sigma), new where an axis was weighted."""
+        predict σ of those axes again through the new filter. Returns (records, estimate, sigma), new where an axis was weighted."""
         if not self.settings.knowledge_band_noise or not sigma:
             return records, estimate, sigma
         t = _time.perf_counter()

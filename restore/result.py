@@ -88,7 +88,7 @@ class IntegrationRecord:
     #: with (:data:`restore.conditioned_excess.KNOWLEDGE_MODEL_ERROR`). Not written to restoration.nc
     conditioned_attitude_psd: np.ndarray | None = None
     #: the band [Hz] where the noise colour the MAP weighs with was read from the differentials themselves
-    #: (:mod:`restore.knowledge_band_noise`); the σ draws' noise takes that colour there. None: not read
+    #: (:mod:`restore.knowledge_band_noise`); None: not read
     knowledge_band_hz: tuple | None = None
 
     def rerun(self, diffs=None, *, frozen: bool = True, lags=None, first_stage_gcv: bool = True) -> np.ndarray:

@@ -1054,8 +1054,8 @@ def knowledge_band_weighted(record: IntegrationRecord, product: Product, setting
 
     The band runs from the record's high-pass to :data:`restore.conditioned_excess.BAND_FRACTION` of the
     knowledge's cut-off (its filter's flat part, where the conditioned prior holds); there the colour replaces
-    the record's own where larger, and the new record's ``knowledge_band_hz`` says where, so that σ's draws
-    simulate that noise (:func:`restore.posterior.posterior_sigma`). None where it does not apply (``knowledge_band_noise`` off, a record not
+    the record's own where larger, and the new record's ``knowledge_band_hz`` says where. σ's draws keep the
+    residual's colour (see :mod:`restore.knowledge_band_noise` on why not this one). None where it does not apply (``knowledge_band_noise`` off, a record not
     conditioned on the knowledge, a method that cannot weigh by a colour, no cut-off recorded) or where the
     differentials show no excess.
     """
