@@ -95,7 +95,8 @@ def knowledge_band_noise_line(restoration, axes) -> str | None:
     if not found:
         return None
     return ("  the pairs' differentials in the AOCS knowledge's band showed matching noise no residual can "
-            "(the scene's band offset moves them like an attitude), and the axis was integrated again weighed by it: " + "; ".join(found))
+            "(the scene's band offset moves them like an attitude); integrated again weighed by it, the noise there "
+            "taken as " + "; ".join(found))
 
 
 def notch_level_line(restoration, axes) -> str | None:

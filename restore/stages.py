@@ -1050,7 +1050,7 @@ def knowledge_conditioned(record: IntegrationRecord, sigma, product: Product, kn
 def knowledge_band_weighted(record: IntegrationRecord, product: Product, settings: RestorationSettings
                             ) -> tuple[IntegrationRecord, float] | None:
     """A knowledge-conditioned axis integrated again, each pair's noise weighed by the colour its differentials
-    show in the knowledge's band (:mod:`restore.knowledge_band_noise`), and the largest factor found.
+    show in the knowledge's band (:mod:`restore.knowledge_band_noise`), and the largest factor they showed.
 
     The band runs from the record's high-pass to :data:`restore.conditioned_excess.BAND_FRACTION` of the
     knowledge's cut-off (its filter's flat part, where the conditioned prior holds); there the colour replaces
@@ -1071,6 +1071,7 @@ def knowledge_band_weighted(record: IntegrationRecord, product: Product, setting
                                    seed=AXES.index(record.axis))
     if colour is None or not np.any(colour > 1.0):
         return None
+    largest = float(np.max(colour))    # what the differentials showed, before the record's own colour joins it
     n = np.asarray(record.diffs).shape[1]
     f = np.fft.rfftfreq(n, record.line_period_s)
     own = record.spectrum.noise_colour
@@ -1078,7 +1079,7 @@ def knowledge_band_weighted(record: IntegrationRecord, product: Product, setting
         colour = np.maximum(colour, np.array([np.interp(f, np.asarray(own[0], dtype=np.float64), c)
                                               for c in np.atleast_2d(np.asarray(own[1], dtype=np.float64))]))
     weighted = replace(record, spectrum=replace(record.spectrum, noise_colour=(f, colour)), knowledge_band_hz=band)
-    return replace(weighted, increment=weighted.rerun()), float(np.max(colour))
+    return replace(weighted, increment=weighted.rerun()), largest
 
 
 def raise_by_local_error(sigma: dict, records: dict, pairs: list, product: Product,
