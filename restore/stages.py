@@ -20,7 +20,7 @@ from .correction import correct_bands, line_median, misregistration, rank_within
 from .errors import RestorationError
 from .integration.methods import integration_method
 from .integration.transfer import pair_snr
-from .integration.wiener import ceiling_on_grid, spectrum_for_lines
+from .integration.wiener import ceiling_on_grid, colour_on_grid, spectrum_for_lines
 from .matching import match_points, support_margin
 from .method_choice import predicted_differential, resolve_method
 from .observability import observability
@@ -1055,9 +1055,9 @@ def knowledge_band_weighted(record: IntegrationRecord, product: Product, setting
     The band runs from the record's high-pass to :data:`restore.conditioned_excess.BAND_FRACTION` of the
     knowledge's cut-off (its filter's flat part, where the conditioned prior holds); there the colour replaces
     the record's own where larger, and the new record's ``knowledge_band_hz`` says where. σ's draws keep the
-    residual's colour (see :mod:`restore.knowledge_band_noise` on why not this one). None where it does not apply (``knowledge_band_noise`` off, a record not
-    conditioned on the knowledge, a method that cannot weigh by a colour, no cut-off recorded) or where the
-    differentials show no excess.
+    residual's colour (see :mod:`restore.knowledge_band_noise` on why not this one). None where it does not
+    apply (``knowledge_band_noise`` off, a record not conditioned on the knowledge, a method that cannot weigh by
+    a colour, no cut-off recorded) or where the differentials show no excess.
     """
     from .conditioned_excess import BAND_FRACTION
     from .knowledge_band_noise import knowledge_band_colour
@@ -1074,10 +1074,8 @@ def knowledge_band_weighted(record: IntegrationRecord, product: Product, setting
     largest = float(np.max(colour))    # what the differentials showed, before the record's own colour joins it
     n = np.asarray(record.diffs).shape[1]
     f = np.fft.rfftfreq(n, record.line_period_s)
-    own = record.spectrum.noise_colour
-    if own is not None:
-        colour = np.maximum(colour, np.array([np.interp(f, np.asarray(own[0], dtype=np.float64), c)
-                                              for c in np.atleast_2d(np.asarray(own[1], dtype=np.float64))]))
+    if record.spectrum.noise_colour is not None:
+        colour = np.maximum(colour, colour_on_grid(record.spectrum.noise_colour, f, len(record.taus)))
     weighted = replace(record, spectrum=replace(record.spectrum, noise_colour=(f, colour)), knowledge_band_hz=band)
     return replace(weighted, increment=weighted.rerun()), largest
 

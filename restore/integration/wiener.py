@@ -34,7 +34,7 @@ from ._common import check_positive, lagrange4_weights, prepare
 from .gaps import estimable_mask
 from .spectrum import SpectralEstimate, estimate_spectrum, notch_mask
 
-__all__ = ["integrate_inverse", "integrate_wiener_fft", "integrate_wiener", "WienerResult", "spectrum_for_lines",
+__all__ = ["colour_on_grid", "integrate_inverse", "integrate_wiener_fft", "integrate_wiener", "WienerResult", "spectrum_for_lines",
            "lag_interpolation", "tone_order", "tone_sweep", "tone_waves", "tone_phase", "tone_chirps",
            "ceiling_on_grid"]
 
@@ -162,7 +162,7 @@ def floor_on_grid(ceiling, f: np.ndarray) -> np.ndarray:
     return np.interp(f, fc, fl, right=0.0)
 
 
-def _colour_on_grid(noise_colour, f: np.ndarray, p: int) -> np.ndarray:
+def colour_on_grid(noise_colour, f: np.ndarray, p: int) -> np.ndarray:
     """``noise_colour`` = (freq, colour (pair, freq)) interpolated at ``f`` (constant beyond its ends)."""
     fc, col = noise_colour
     fc = np.asarray(fc, dtype=np.float64)
@@ -515,7 +515,7 @@ def integrate_wiener(diffs, taus, dt, *, noise_std=None, psd=None, pad_fraction:
     opts = dict(spectrum_options or {})
     spec: SpectralEstimate = estimate_spectrum(D, taus, dt, n_fft=m, noise_std=noise_std, **opts)
     passes = 0 if psd is not None else int(refine)
-    colour = None if noise_colour is None else _colour_on_grid(noise_colour, spec.freq, p)
+    colour = None if noise_colour is None else colour_on_grid(noise_colour, spec.freq, p)
     grid = None
     ceiling = None if psd is not None or psd_ceiling is None else ceiling_on_grid(psd_ceiling, spec.freq)
     floor = None if ceiling is None else np.minimum(floor_on_grid(psd_ceiling, spec.freq), ceiling)
