@@ -123,6 +123,26 @@ def test_a_slow_noise_the_draws_lack_is_read_from_the_differentials(seed):
     assert knowledge_band_colour(rec, (1.0, 1.1), samples=4, seed=0) is None
 
 
+def test_the_pooled_read_is_one_colour_for_every_pair_and_scatters_less_than_each_pair_s():
+    """Every pair under the same slow noise: each pair's own read scatters between the pairs (which would weigh
+    them against each other by chance) and between records; the pooled read, one per record, scatters less and
+    stays a lower bound."""
+    f = np.fft.rfftfreq(N, DT)
+    inb = (f >= BAND[0]) & (f <= BAND[1])
+    own, pooled = [], []
+    for seed in range(3, 9):
+        rec, _ = _record(np.random.default_rng(seed), s0=1e-16)
+        per = knowledge_band_colour(rec, BAND, samples=8, seed=0, pooled=False)[:, inb]
+        one = knowledge_band_colour(rec, BAND, samples=8, seed=0)[:, inb]
+        assert np.all(one == one[0])
+        own.append(np.log(per / _excess(f[inb])))
+        pooled.append(np.log(one[0] / _excess(f[inb])))
+        assert 0.3 < np.exp(np.mean(pooled[-1])) < 1.0
+    own, pooled = np.concatenate([x.ravel() for x in own]), np.concatenate(pooled)
+    assert np.std(pooled) < 0.8 * np.std(own)
+    assert np.mean(pooled) > np.mean(own)        # more degrees of freedom: a lower bound nearer the truth
+
+
 def test_weighing_by_it_lowers_the_error_in_the_band_and_the_rerun_reproduces_it():
     rec, truth = _record(np.random.default_rng(7))
     product = SimpleNamespace(ds=SimpleNamespace(attrs={"knowledge_cutoff_hz": BAND[1] / 0.9}))
