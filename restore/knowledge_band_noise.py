@@ -46,12 +46,17 @@ unseen products (roll / pitch px, per pair → pooled): that one
 0.0295 / 0.0350 → 0.0283 / 0.0349, quiet, clouds and low-SNR scenes' roll
 +0.0006 each, five others within ± 0.0001.
 
-σ's draws do not take this colour (they keep the residual's). Drawn with it,
-the suite's huge_amplitude (12 px CMG lines) predicted 0.045 / 0.059 px
-against 0.034 / 0.041 without, while its error stayed 0.016 / 0.025 outside
-the unobservable part (σ × 0.77 / 0.80 → 0.59 / 0.56): at that amplitude the
-differentials' excess in the band is not a noise that reaches the estimate as
-an independent one would; elsewhere in the suite the draws moved by ≤ 6 %.
+σ's draws do not take this colour as a noise of each pair (they keep the
+residual's colour). Drawn that way (aaa4606), the suite's huge_amplitude
+(12 px CMG lines) predicted 0.045 / 0.059 px against 0.034 / 0.041 without,
+while its error stayed 0.016 / 0.025 outside the unobservable part (σ × 0.77
+/ 0.80 → 0.59 / 0.56); elsewhere the draws moved by ≤ 6 %: the weighted MAP
+keeps such a noise out. What it does not keep out is the excess as what it
+is, an offset that moves every pair as an attitude does: σ's draws carry
+one (:func:`knowledge_band_offset_psd`: the pooled colour read unbiased,
+``S = (c − 1) Σ ν_j / Σ |G_j|²`` in the band), and the MAP passes part of it
+as it would an attitude (forty-fourth session; on synthetic records with
+such an offset the actual error is 1.07 × σ with it, 1.25 × without).
 
 Outside the conditioned band the differentials hold the attitude itself,
 whose prior the data set: there nothing is measured (colour 1). The colour
@@ -68,7 +73,7 @@ from scipy.stats import chi2
 from .posterior import _band_edges, draw_differentials
 
 __all__ = ["COLOUR_LIMIT", "MIN_NOISE_SHARE", "HANN_ENBW", "CONFIDENCE", "tapered_band_power", "colour_from_differentials",
-           "knowledge_band_colour"]
+           "knowledge_band_colour", "knowledge_band_offset_psd"]
 
 #: the largest factor on the white noise taken (a band whose real power is dominated by something else)
 COLOUR_LIMIT = 64.0
@@ -134,12 +139,13 @@ def colour_from_differentials(real, simulated, noise, edges: list, n: int, in_ba
     return np.where(mask[None, :], on_bins, 1.0)
 
 
-def knowledge_band_colour(record, band_hz, *, samples: int = 8, seed: int = 0, pooled: bool = True
-                          ) -> np.ndarray | None:
+def knowledge_band_colour(record, band_hz, *, samples: int = 8, seed: int = 0, pooled: bool = True,
+                          confidence: float | None = CONFIDENCE) -> np.ndarray | None:
     """The noise's colour (pair, ``rfftfreq(lines, Δt)``) the record's differentials show in ``band_hz``
     against its own draws (module docstring); None where no band of the record lies inside it or the record
     cannot be drawn from (no prior). ``pooled``: one colour for every pair, read from the pairs' powers summed
-    (the default; the module docstring says why); otherwise each pair's own."""
+    (the default; the module docstring says why); otherwise each pair's own. ``confidence``: as
+    :func:`colour_from_differentials` reads it (None: unbiased)."""
     if getattr(record, "spectrum", None) is None:
         return None
     d = np.asarray(record.diffs, dtype=np.float64)
@@ -155,7 +161,36 @@ def knowledge_band_colour(record, band_hz, *, samples: int = 8, seed: int = 0, p
     noise = np.mean([tapered_band_power(z, edges) for z in noises], axis=0)
     real = tapered_band_power(d, edges)
     if not pooled:
-        return colour_from_differentials(real, simulated, noise, edges, n, in_band)
+        return colour_from_differentials(real, simulated, noise, edges, n, in_band, confidence=confidence)
     one = colour_from_differentials(real.sum(axis=0)[None, :], simulated.sum(axis=0)[None, :],
-                                    noise.sum(axis=0)[None, :], edges, n, in_band, rows_summed=real.shape[0])
+                                    noise.sum(axis=0)[None, :], edges, n, in_band, confidence=confidence,
+                                    rows_summed=real.shape[0])
     return np.repeat(one, real.shape[0], axis=0)
+
+
+def knowledge_band_offset_psd(record, *, samples: int = 8, seed: int = 0) -> tuple[np.ndarray, np.ndarray] | None:
+    """The PSD of an attitude-like offset as large as the excess the record's differentials show in its
+    ``knowledge_band_hz``: ``(freq, psd)`` on ``rfftfreq(lines, Δt)`` [Hz, two-sided rad²/Hz], or None where the
+    record holds no such band (not weighed by it) or cannot be drawn from.
+
+    ``S(f) = (c(f) − 1) Σ_j ν_j / Σ_j |G_j(f)|²`` in the band, 0 outside: ``c`` the pooled colour read unbiased
+    (:func:`knowledge_band_colour` with ``confidence=None``: σ wants the expected size, not a lower bound),
+    ``ν_j = σ_j² Δt`` pair ``j``'s white noise level and ``|G_j|² = 2 − 2 cos 2πfτ_j`` its gain on an
+    attitude; an offset of that PSD, seen through every pair as an attitude is, raises the pairs' summed band
+    power by the excess. The weighted MAP lets part of it through, as it would an attitude: what σ's draws
+    must hold (:func:`restore.posterior.posterior_sigma`; the module docstring has the numbers).
+    """
+    band = getattr(record, "knowledge_band_hz", None)
+    if band is None or getattr(record, "spectrum", None) is None:
+        return None
+    colour = knowledge_band_colour(record, band, samples=samples, seed=seed, confidence=None)
+    if colour is None:
+        return None
+    n, dt = np.asarray(record.diffs).shape[1], float(record.line_period_s)
+    f = np.fft.rfftfreq(n, dt)
+    taus = np.asarray(record.taus, dtype=np.float64)
+    nu = np.broadcast_to(np.asarray(record.spectrum.noise_std, dtype=np.float64), taus.shape) ** 2 * dt
+    gain = np.sum(2.0 - 2.0 * np.cos(2.0 * np.pi * f[None, :] * taus[:, None]), axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        psd = np.where(gain > 0, (colour[0] - 1.0) * float(np.sum(nu)) / gain, 0.0)
+    return f, np.where(np.isfinite(psd), np.maximum(psd, 0.0), 0.0)

@@ -583,21 +583,30 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
         times from the record's first line): what it leaves of the noise is
         counted instead (:meth:`~restore.knowledge_smoothing.KnowledgeSmoothing.error_draw`).
 
+    A record weighed by the noise its differentials show in the AOCS knowledge's band (``knowledge_band_hz``)
+    has the draws' differentials carry an attitude-like offset of the size measured there
+    (:func:`restore.knowledge_band_noise.knowledge_band_offset_psd`, its own random stream): the scene's band
+    offset moves the pairs as an attitude does, so the MAP passes part of it, which no residual shows.
+
     Returns
     -------
     PosteriorSigma
     """
+    from .knowledge_band_noise import knowledge_band_offset_psd
+
     d, valid, n, dt, taus, lags, freq, psd, ext = _draw_setup(record, samples, knowledge_noise_rad,
                                                               knowledge_rate_hz)
     noise = noise_per_line(record)
     rng = np.random.default_rng(seed)
     krng = _knowledge_rng(seed)
 
-    def run(colour, k: int, check: bool, shared=None):
+    def run(colour, k: int, check: bool, shared=None, offset=None):
         errs, resid = [], []
         for _ in range(k):
             th, ref = _prior_and_reference(record, freq, psd, ext, rng)
             ds = simulated_differentials(th, taus, lags, valid, dt) + correlated_noise(noise, colour, shared, dt, rng)
+            if offset is not None:   # moves the pairs as an attitude would, but is none: all it leaves is error
+                ds = ds + simulated_differentials(prior_draw(*offset, ext, dt, orng), taus, lags, valid, dt)
             est = record.rerun(ds, first_stage_gcv=False)
             errs.append(_draw_error(est, ref))
             if check:
@@ -609,6 +618,8 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     errs, sim = run(None, samples, check_noise)
     scale = 1.0
     colour = shared = estimate = None
+    offset = knowledge_band_offset_psd(record, samples=samples, seed=seed)
+    orng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x4F46]))   # its own stream
     if check_noise:
         resid = fit_residuals(d, np.asarray(record.increment, dtype=np.float64), taus, record.lags_s, dt,
                               highpass_hz=record.highpass_hz)
@@ -620,7 +631,8 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
         if shared is not None:   # the residual of the model with shared bands is smaller: compare with that one
             _, sim = run(None, samples, True, shared)
         estimate = noise_colour_estimate(real, np.mean(sim, axis=0), edges, n, draws=len(sim))
-        errs, _ = run(estimate, samples, False, shared)
+    if check_noise or offset is not None:
+        errs, _ = run(estimate, samples, False, shared, offset)
     kn = knowledge_error_moments(record, np.isfinite(errs).any(axis=0), krng,
                                  knowledge_noise_rad=knowledge_noise_rad, knowledge_rate_hz=knowledge_rate_hz,
                                  knowledge_smoothing=knowledge_smoothing)
