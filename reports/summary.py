@@ -96,7 +96,8 @@ def knowledge_band_noise_line(restoration, axes) -> str | None:
         return None
     return ("  the pairs' differentials in the AOCS knowledge's band showed matching noise no residual can "
             "(the scene's band offset moves them like an attitude); integrated again weighed by it, the noise there "
-            "taken as " + "; ".join(found))
+            "taken as " + "; ".join(found) + " (a lower bound); σ draws the excess as an offset that moves the pairs "
+            "like an attitude")
 
 
 def notch_level_line(restoration, axes) -> str | None:

@@ -599,6 +599,8 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     noise = noise_per_line(record)
     rng = np.random.default_rng(seed)
     krng = _knowledge_rng(seed)
+    offset = knowledge_band_offset_psd(record, samples=samples, seed=seed)
+    orng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x4F46]))   # the offset's own stream
 
     def run(colour, k: int, check: bool, shared=None, offset=None):
         errs, resid = [], []
@@ -618,8 +620,6 @@ def posterior_sigma(record, *, samples: int = 8, seed: int = 0, smooth_lines: in
     errs, sim = run(None, samples, check_noise)
     scale = 1.0
     colour = shared = estimate = None
-    offset = knowledge_band_offset_psd(record, samples=samples, seed=seed)
-    orng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x4F46]))   # its own stream
     if check_noise:
         resid = fit_residuals(d, np.asarray(record.increment, dtype=np.float64), taus, record.lags_s, dt,
                               highpass_hz=record.highpass_hz)
