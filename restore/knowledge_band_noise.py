@@ -40,11 +40,11 @@ differentials less the truth's showed 4.5 / 3.5 / 2.6, the longest pair
 was weighed down for the others, and the error outside the unobservable
 part rose 0.0229 → 0.0260 px (pooled: 0.0240). Pooled, the pairs keep the
 weights their residuals gave them; the read decides only how far the band
-follows the knowledge-conditioned prior rather than the pairs. On nine
+follows the knowledge-conditioned prior rather than the pairs. On seventeen
 unseen products (roll / pitch px, per pair → pooled): that one
 0.0235 / 0.0260 → 0.0229 / 0.0240, a causal knowledge's
-0.0295 / 0.0350 → 0.0283 / 0.0349, quiet, clouds and low-SNR scenes' roll
-+0.0006 each, five others within ± 0.0001.
+0.0295 / 0.0350 → 0.0283 / 0.0349, four scenes' roll +0.0006 each, one
+pitch +0.0004, one −0.0003, eleven others within ± 0.0001.
 
 σ's draws do not take this colour as a noise of each pair (they keep the
 residual's colour). Drawn that way (aaa4606), the suite's huge_amplitude
@@ -56,7 +56,9 @@ is, an offset that moves every pair as an attitude does: σ's draws carry
 one (:func:`knowledge_band_offset_psd`: the pooled colour read unbiased,
 ``S = (c − 1) Σ ν_j / Σ |G_j|²`` in the band), and the MAP passes part of it
 as it would an attitude (forty-fourth session; on synthetic records with
-such an offset the actual error is 1.07 × σ with it, 1.25 × without).
+such an offset the actual error is 1.07 × σ with it, 1.25 × without; on
+unseen products causal 777's pitch × 1.69 → 1.42, real_aocs 777's roll
+1.76 → 1.40, quiet 777's pitch 1.47 → 1.32, the suite's ratios 0.70–1.46).
 
 Outside the conditioned band the differentials hold the attitude itself,
 whose prior the data set: there nothing is measured (colour 1). The colour
