@@ -72,6 +72,7 @@ import numpy as np
 from scipy.signal.windows import hann
 from scipy.stats import chi2
 
+from .integration.transfer import pair_transfer
 from .posterior import _band_edges, draw_differentials
 
 __all__ = ["COLOUR_LIMIT", "MIN_NOISE_SHARE", "HANN_ENBW", "CONFIDENCE", "tapered_band_power", "colour_from_differentials",
@@ -177,10 +178,11 @@ def knowledge_band_offset_psd(record, *, samples: int = 8, seed: int = 0) -> tup
 
     ``S(f) = (c(f) − 1) Σ_j ν_j / Σ_j |G_j(f)|²`` in the band, 0 outside: ``c`` the pooled colour read unbiased
     (:func:`knowledge_band_colour` with ``confidence=None``: σ wants the expected size, not a lower bound),
-    ``ν_j = σ_j² Δt`` pair ``j``'s white noise level and ``|G_j|² = 2 − 2 cos 2πfτ_j`` its gain on an
-    attitude; an offset of that PSD, seen through every pair as an attitude is, raises the pairs' summed band
-    power by the excess. The weighted MAP lets part of it through, as it would an attitude: what σ's draws
-    must hold (:func:`restore.posterior.posterior_sigma`; the module docstring has the numbers).
+    ``ν_j = σ_j² Δt`` pair ``j``'s white noise level and ``|G_j|²`` its gain on an attitude
+    (:func:`restore.integration.transfer.pair_transfer`); an offset of that PSD, seen through every pair as an
+    attitude is, raises the pairs' summed band power by the excess. The weighted MAP lets part of it through,
+    as it would an attitude: what σ's draws must hold (:func:`restore.posterior.posterior_sigma`; the module
+    docstring has the numbers).
     """
     band = getattr(record, "knowledge_band_hz", None)
     if band is None or getattr(record, "spectrum", None) is None:
@@ -192,7 +194,7 @@ def knowledge_band_offset_psd(record, *, samples: int = 8, seed: int = 0) -> tup
     f = np.fft.rfftfreq(n, dt)
     taus = np.asarray(record.taus, dtype=np.float64)
     nu = np.broadcast_to(np.asarray(record.spectrum.noise_std, dtype=np.float64), taus.shape) ** 2 * dt
-    gain = np.sum(2.0 - 2.0 * np.cos(2.0 * np.pi * f[None, :] * taus[:, None]), axis=0)
+    gain = np.sum([np.abs(pair_transfer(f, tau)) ** 2 for tau in taus], axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         psd = np.where(gain > 0, (colour[0] - 1.0) * float(np.sum(nu)) / gain, 0.0)
     return f, np.where(np.isfinite(psd), np.maximum(psd, 0.0), 0.0)
