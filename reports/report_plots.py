@@ -16,7 +16,7 @@ matplotlib.use("Agg")
 
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter  # noqa: E402
+from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter  # noqa: E402
 
 from reports import plotting as P  # noqa: E402
 from reports.report_data import AXES, minmax_decimate  # noqa: E402
@@ -322,7 +322,10 @@ def draw_uncertainty(axs, d: dict, axis: str, *, ifov_rad: float):
         for axis_ in (cal.xaxis, cal.yaxis):
             # less than a decade wide: the minor ticks' own labels (2×10⁻², 3×10⁻²…) ran into each other
             axis_.set_minor_formatter(NullFormatter())
-            axis_.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
+            # under a factor 4 wide the log locator falls back to evenly spaced ticks, crowded at the top of a log
+            # axis (0.0225, 0.025, 0.0275 ran into each other): a few round values instead
+            axis_.set_major_locator(MaxNLocator(nbins=4) if hi / lo < 4.0 else
+                                    LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
             axis_.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
         cal.set_xlabel("predicted σ (RMS in bin) [px]")
         cal.set_ylabel("actual RMS error [px]")
