@@ -28,6 +28,11 @@ def _excess(f):
     return 1.0 + 39.0 * np.exp(-(np.asarray(f) / 4.0) ** 2)
 
 
+def _white(f):
+    """White matching noise: power 1 × the white level everywhere."""
+    return np.ones_like(np.asarray(f, dtype=np.float64))
+
+
 def _record(rng, colour=_excess, s0=S0):
     """A record as the pipeline keeps it, its prior the true one (flat, ``s0``), its noise white × ``colour``; and
     the truth."""
@@ -116,7 +121,7 @@ def test_a_slow_noise_the_draws_lack_is_read_from_the_differentials(seed):
     assert np.all(col[:, ~inb] == 1.0)
     ratio = col[:, inb] / _excess(f[inb])[None, :]
     assert 0.2 < np.exp(np.mean(np.log(ratio))) < 1.0
-    white, _ = _record(np.random.default_rng(seed), colour=lambda f: np.ones_like(f), s0=1e-16)
+    white, _ = _record(np.random.default_rng(seed), colour=_white, s0=1e-16)
     w = knowledge_band_colour(white, BAND, samples=8, seed=0)[:, inb]
     assert np.mean(w) < 1.1 and np.max(w) < 2.0
     # a band no band of the record lies wholly in: nothing measured
@@ -201,7 +206,7 @@ def _record_with_offset(rng, s0=1e-16):
     the truth does not hold."""
     from restore.posterior import prior_draw
 
-    rec, theta = _record(rng, colour=lambda f: np.ones_like(f), s0=s0)
+    rec, theta = _record(rng, colour=_white, s0=s0)
     m = 4 * N
     fo = np.fft.rfftfreq(8192, DT)
     off = prior_draw(fo, np.where((fo >= 1.0) & (fo <= 6.0), S_OFF, 0.0), m, DT, rng)
@@ -237,7 +242,7 @@ def test_sigma_draws_the_attitude_like_offset_the_knowledge_band_shows():
     assert 1 / 1.2 < with_offset < 1.2
     assert np.sqrt(np.mean(actual) / np.mean(without)) > 1.15
     # white noise alone: next to nothing is read
-    white, _ = _record(np.random.default_rng(3), colour=lambda f: np.ones_like(f), s0=1e-16)
+    white, _ = _record(np.random.default_rng(3), colour=_white, s0=1e-16)
     f, psd = knowledge_band_offset_psd(dataclasses.replace(white, knowledge_band_hz=(0.0, BAND[1])))
     assert np.mean(psd[(f >= 1.5) & (f <= 5.5)]) < 0.05 * S_OFF
 
