@@ -233,9 +233,10 @@ MEANING = {
     "sampling spreads, σ takes its share of any excess; the check itself is always recorded, restoration.nc sigma_<axis> knowledge_check, when the product records the knowledge's "
     "noise and filter, and the band holds at least three periodogram bins); the data cannot tell which prediction is short, so each takes its share",
     "restoration.knowledge_fusion": "where a stretch of the restored angle holds, between the high-pass and 0.7 × "
-    "the knowledge's cut-off, ten times the power the AOCS knowledge's error has there (its noise, or the prior "
-    "where larger: a drift near a record end or a gap edge from band offsets that move like an attitude), take the "
-    "knowledge's band there with the minimum-variance weight 1 − v_k / P and add that weight's error to σ "
+    "the knowledge's cut-off and once its strong lines above that band are fitted out, more than five times the "
+    "power the AOCS knowledge's error has there (its noise, or the prior where larger: a drift near a record end "
+    "or a gap edge, band offsets that move like an attitude), take the knowledge's band there with the "
+    "minimum-variance weight 1 − v_k / P, brought in from five to ten times, and add that weight's error to σ "
     "(restore.knowledge_fusion; restoration.nc knowledge_fusion_weight_<axis>); needs the knowledge's noise and "
     "filter in product.nc",
     "restoration.max_sigma_px": "lines whose predicted σ exceeds this [px] are flagged and not restored; \"auto\": "

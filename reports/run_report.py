@@ -564,9 +564,10 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
         from restore.knowledge_fusion import FUSION_HIGH_FRACTION, FUSION_THRESHOLD
 
         pg.para("Knowledge fusion: " + ", ".join(f"{a} {n} lines" for a, n in fused.items()) + " took the AOCS "
-                f"knowledge's band below {FUSION_HIGH_FRACTION:g} × its cut-off, where the restored angle's own band "
-                f"held {FUSION_THRESHOLD:g} times the "
-                "power the knowledge's error has there (a drift at a record end or a gap edge, from band offsets "
+                f"knowledge's band below {FUSION_HIGH_FRACTION:g} × its cut-off, where the restored angle's own band, "
+                "its strong lines above the band kept whole, held more than "
+                f"{FUSION_THRESHOLD / 2:g} times the power the knowledge's error has there (full weight from "
+                f"{FUSION_THRESHOLD:g} times: a drift at a record end or a gap edge, or band offsets "
                 "that move like an attitude); σ holds the combination's error on those lines "
                 "(restoration.knowledge_fusion).")
     explained = _explained_lines(run, unc)

@@ -50,7 +50,7 @@ from scipy.stats import chi2
 from .integration.transfer import fused_snr
 from .knowledge_check import _fitted_line, tapered_power
 
-__all__ = ["ConditionedExcess", "ExcessShrink", "lines_above_removed", "wiener_output_power", "estimate_power",
+__all__ = ["ConditionedExcess", "ExcessShrink", "lines_above_removed", "strong_lines_above", "wiener_output_power", "estimate_power",
            "conditioned_excess", "record_conditioned_excess", "excess_gain", "shrunk_excess", "excess_factor", "offset_error_above", "offset_shared_by_sun", "as_read", "input_offset",
            "EXCESS_FALSE_ALARM", "BIN_DOF",
            "BAND_FRACTION", "KNOWLEDGE_MODEL_ERROR"]
@@ -148,6 +148,18 @@ class ConditionedExcess:
                    shared_above_rad=None if d.get("shared_above_rad") is None else float(d["shared_above_rad"]))
 
 
+def _strongest_line_above(v, m, top_bin: int, band_bins, ratio: float) -> int | None:
+    """Bin of the strongest peak of ``v``'s tapered periodogram above ``top_bin + 1`` when it exceeds ``ratio`` ×
+    the mean over ``band_bins``; None otherwise."""
+    p = tapered_power(v, m)
+    far = np.zeros(p.size, dtype=bool)
+    far[top_bin + 2:-1] = True
+    if not far.any():
+        return None
+    j = int(np.argmax(np.where(far, p, 0.0)))
+    return j if p[j] >= ratio * float(np.mean(p[band_bins])) else None
+
+
 def lines_above_removed(x, mask, top_bin: int, *, ratio: float = LINE_RATIO, max_lines: int = MAX_LINES,
                         band_bins=None) -> np.ndarray:
     """``x`` less its strongest sines above bin ``top_bin + 1``, strongest first, while the peak's tapered
@@ -167,16 +179,80 @@ def lines_above_removed(x, mask, top_bin: int, *, ratio: float = LINE_RATIO, max
     b = np.arange(1, top_bin + 1) if band_bins is None else np.asarray(band_bins)
     t = np.arange(n, dtype=np.float64)
     for _ in range(int(max_lines)):
-        p = tapered_power(v, m)
-        far = np.zeros(p.size, dtype=bool)
-        far[top_bin + 2:-1] = True
-        if not far.any():
-            break
-        j = int(np.argmax(np.where(far, p, 0.0)))
-        if p[j] < ratio * float(np.mean(p[b])):
+        j = _strongest_line_above(v, m, top_bin, b, ratio)
+        if j is None:
             break
         v = np.where(m, v - _fitted_line(v, m, t, j, n), 0.0)
     return v
+
+
+#: the joint fit of :func:`strong_lines_above` takes the record's quadratic with its lines (a slow drift would
+#: otherwise lean on the lowest one), and refines each frequency against the others this many times
+JOINT_POLY_DEGREE = 2
+JOINT_REFINE_ROUNDS = 3
+
+
+def _joint_sines(v, m, t, u, freqs) -> tuple[float, np.ndarray]:
+    """Least squares of ``v`` on the lines ``m`` over a quadratic in ``u`` and a sine per frequency of ``freqs``
+    [cycles per line]: (residual sum of squares, the sines' sum over all lines)."""
+    cols = [u ** d for d in range(JOINT_POLY_DEGREE + 1)]
+    for f in freqs:
+        cols += [np.cos(2.0 * np.pi * f * t), np.sin(2.0 * np.pi * f * t)]
+    a = np.stack(cols, axis=1)
+    coef, *_ = np.linalg.lstsq(a[m], v[m], rcond=None)
+    r = v[m] - a[m] @ coef
+    k = JOINT_POLY_DEGREE + 1
+    return float(r @ r), a[:, k:] @ coef[k:]
+
+
+def strong_lines_above(x, mask, top_bin: int, *, ratio: float = LINE_RATIO, max_lines: int = MAX_LINES,
+                       band_bins=None) -> tuple[np.ndarray, list]:
+    """The strong sines of ``x`` above bin ``top_bin + 1`` (found as :func:`lines_above_removed` finds them),
+    fitted jointly: ``(their sum over all lines, their frequencies [cycles per line])``; zeros and ``[]`` when
+    there are none.
+
+    One sine at a time, each fitted on what the previous ones left, is biased by the others' leakage when a
+    record holds a few cycles of lines a few bins apart (3.3, 5.1 and 7.7 Hz over 1.6 s), and its residual
+    is largest at the record's ends. Here every line found is fitted again with the others and a quadratic
+    (amplitudes and phases by least squares, each frequency refined within half a bin against the rest,
+    :data:`JOINT_REFINE_ROUNDS` times). On the true knowledge error of an unseen low_frequencies scene (seed
+    777, roll: its 3.3, 5.1 and 7.7 Hz lines and five CMG ones) the residual's content at 0.4–1.4 Hz on the
+    record's first line: 0.16 px one line at a time, 0.046 jointly (the knowledge's white noise there: 0.029).
+    """
+    from scipy.optimize import minimize_scalar
+
+    v = np.asarray(x, dtype=np.float64)
+    m = np.asarray(mask, dtype=bool) & np.isfinite(v)
+    n = v.size
+    v = np.where(m, v, 0.0)
+    if np.count_nonzero(m) < 8 or top_bin < 1:
+        return np.zeros(n), []
+    b = np.arange(1, top_bin + 1) if band_bins is None else np.asarray(band_bins)
+    t = np.arange(n, dtype=np.float64)
+    u = np.linspace(-1.0, 1.0, n)
+    freqs: list = []
+    r = v
+    for _ in range(int(max_lines)):
+        j = _strongest_line_above(r, m, top_bin, b, ratio)
+        if j is None:
+            break
+        f_new = float(minimize_scalar(lambda f: _joint_sines(v, m, t, u, freqs + [f])[0],
+                                      bounds=((j - 1.0) / n, (j + 1.0) / n), method="bounded",
+                                      options={"xatol": 1e-4 / n}).x)
+        if any(abs(f_new - f) < 1.0 / n for f in freqs):   # a sidelobe of what is left of a line already fitted
+            break
+        freqs.append(f_new)
+        r = np.where(m, v - _joint_sines(v, m, t, u, freqs)[1], 0.0)
+    if not freqs:
+        return np.zeros(n), []
+    found = list(freqs)
+    for _ in range(JOINT_REFINE_ROUNDS if len(freqs) > 1 else 0):
+        for i, f0 in enumerate(found):            # within half a bin of where each was found: lines stay apart
+            def cost(f, i=i):
+                return _joint_sines(v, m, t, u, freqs[:i] + [f] + freqs[i + 1:])[0]
+            freqs[i] = float(minimize_scalar(cost, bounds=(f0 - 0.5 / n, f0 + 0.5 / n), method="bounded",
+                                             options={"xatol": 1e-4 / n}).x)
+    return _joint_sines(v, m, t, u, freqs)[1], freqs
 
 
 def wiener_output_power(prior, noise) -> np.ndarray:

@@ -274,7 +274,8 @@ def restoration_dataset(res: RestorationResult) -> xr.Dataset:
     for a, fu in getattr(res, "knowledge_fusion", {}).items():
         data[f"knowledge_fusion_weight_{a}"] = ("time", np.asarray(fu.weight, dtype=np.float64), {
             "long_name": f"weight of the AOCS knowledge's band in the restored {a} (0: the images' estimate kept; "
-                         "restore.knowledge_fusion)", "band_top_hz": float(fu.band_top_hz)})
+                         "restore.knowledge_fusion)", "band_top_hz": float(fu.band_top_hz),
+            "lines_kept_hz": np.asarray(getattr(fu, "lines_kept_hz", ()), dtype=np.float64)})
         data[f"knowledge_fusion_variance_{a}"] = ("time", np.asarray(fu.knowledge_band_rad2, dtype=np.float64), {
             "units": "rad2", "long_name": "the knowledge's expected error variance in the band, per line"})
     coords.update({"time": ("time", res.time, {"units": "s"}), "pair": ("pair", np.array(names))})
@@ -315,8 +316,10 @@ def _knowledge_fusion_from(ds) -> dict:
         if f"knowledge_fusion_weight_{a}" in ds.variables:
             w = _values(ds, f"knowledge_fusion_weight_{a}")
             v = _values(ds, f"knowledge_fusion_variance_{a}")
-            out[a] = KnowledgeFusion(weight=w, band_top_hz=float(ds[f"knowledge_fusion_weight_{a}"].attrs.get(
-                "band_top_hz", np.nan)), knowledge_band_rad2=v, added_rad2=w * v)
+            attrs = ds[f"knowledge_fusion_weight_{a}"].attrs
+            out[a] = KnowledgeFusion(weight=w, band_top_hz=float(attrs.get("band_top_hz", np.nan)),
+                                     knowledge_band_rad2=v, added_rad2=w * v,
+                                     lines_kept_hz=tuple(float(f) for f in np.atleast_1d(attrs.get("lines_kept_hz", ()))))
     return out
 
 
