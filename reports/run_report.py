@@ -566,8 +566,9 @@ def _uncertainty_section(pg: _Page, run: D.RunData, sc: dict):
         pg.para("Knowledge fusion: " + ", ".join(f"{a} {n} lines" for a, n in fused.items()) + " took the AOCS "
                 f"knowledge's band below {FUSION_HIGH_FRACTION:g} × its cut-off, where the restored angle's own band, "
                 "its strong lines above the band kept whole, held more than "
-                f"{FUSION_THRESHOLD / 2:g} times the power the knowledge's error has there (full weight from "
-                f"{FUSION_THRESHOLD:g} times: a drift at a record end or a gap edge, or band offsets "
+                f"{FUSION_THRESHOLD / 2:g} times the power the knowledge's error has there (the minimum-variance "
+                f"weight from {FUSION_THRESHOLD:g} times, brought in linearly from {FUSION_THRESHOLD / 2:g}: a drift "
+                "at a record end or a gap edge, or band offsets "
                 "that move like an attitude); σ holds the combination's error on those lines "
                 "(restoration.knowledge_fusion).")
     explained = _explained_lines(run, unc)

@@ -148,12 +148,12 @@ class ConditionedExcess:
                    shared_above_rad=None if d.get("shared_above_rad") is None else float(d["shared_above_rad"]))
 
 
-def _strongest_line_above(v, m, top_bin: int, band_bins, ratio: float) -> int | None:
-    """Bin of the strongest peak of ``v``'s tapered periodogram above ``top_bin + 1`` when it exceeds ``ratio`` ×
-    the mean over ``band_bins``; None otherwise."""
+def _strongest_line_above(v, m, top_bin: int, band_bins, ratio: float, max_bin: int | None = None) -> int | None:
+    """Bin of the strongest peak of ``v``'s tapered periodogram above ``top_bin + 1`` (up to ``max_bin``) when it
+    exceeds ``ratio`` × the mean over ``band_bins``; None otherwise."""
     p = tapered_power(v, m)
     far = np.zeros(p.size, dtype=bool)
-    far[top_bin + 2:-1] = True
+    far[top_bin + 2:-1 if max_bin is None else min(int(max_bin) + 1, p.size - 1)] = True
     if not far.any():
         return None
     j = int(np.argmax(np.where(far, p, 0.0)))
@@ -206,10 +206,10 @@ def _joint_sines(v, m, t, u, freqs) -> tuple[float, np.ndarray]:
 
 
 def strong_lines_above(x, mask, top_bin: int, *, ratio: float = LINE_RATIO, max_lines: int = MAX_LINES,
-                       band_bins=None) -> tuple[np.ndarray, list]:
-    """The strong sines of ``x`` above bin ``top_bin + 1`` (found as :func:`lines_above_removed` finds them),
-    fitted jointly: ``(their sum over all lines, their frequencies [cycles per line])``; zeros and ``[]`` when
-    there are none.
+                       band_bins=None, max_bin: int | None = None) -> tuple[np.ndarray, list]:
+    """The strong sines of ``x`` above bin ``top_bin + 1`` and up to ``max_bin`` (found as
+    :func:`lines_above_removed` finds them), fitted jointly: ``(their sum over all lines, their frequencies
+    [cycles per line])``; zeros and ``[]`` when there are none.
 
     One sine at a time, each fitted on what the previous ones left, is biased by the others' leakage when a
     record holds a few cycles of lines a few bins apart (3.3, 5.1 and 7.7 Hz over 1.6 s), and its residual
@@ -233,7 +233,7 @@ def strong_lines_above(x, mask, top_bin: int, *, ratio: float = LINE_RATIO, max_
     freqs: list = []
     r = v
     for _ in range(int(max_lines)):
-        j = _strongest_line_above(r, m, top_bin, b, ratio)
+        j = _strongest_line_above(r, m, top_bin, b, ratio, max_bin)
         if j is None:
             break
         f_new = float(minimize_scalar(lambda f: _joint_sines(v, m, t, u, freqs + [f])[0],
