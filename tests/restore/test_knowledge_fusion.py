@@ -223,3 +223,28 @@ def test_a_drift_under_strong_lines_above_the_band_is_taken_and_the_lines_kept_w
     assert rms(out - x0) < 0.4 * rms(drift) and rms(out - x0) < rms(above) + 3 * np.sqrt(v)
     # the lines are whole: past the drift the fused estimate is the estimate
     np.testing.assert_array_equal(out[2000:], (x0 + drift)[2000:])
+
+
+def test_lines_far_above_the_band_are_left_to_the_prior():
+    """Only lines up to LINES_UP_TO × the band's top are fitted out: beyond, the band's filter passes nothing of
+    them inside the record, and near an end the prior's draws hold what it passes (a fit would trade that for
+    its misfit). Under a 2 Hz knowledge (top 1.4 Hz, lines up to 8.4 Hz) a 3.3 Hz line is kept whole, a 20 Hz one
+    is not fitted (the band holding only the knowledge's noise, a residual peak may be: harmless), and the estimate, holding both and nothing else, is left bit for bit."""
+    from restore.knowledge_fusion import LINES_UP_TO
+
+    cut, hp = 2.0, 0.4
+    assert LINES_UP_TO * 0.7 * cut < 20.0
+    t = np.arange(N) * DT
+    x = _target(2) + PX * (np.sin(2 * np.pi * 3.3 * t + 0.3) + np.sin(2 * np.pi * 20.0 * t + 1.1))
+
+    def line_psd(f):
+        return sum(np.where(np.abs(f - f0) < 0.3, PX ** 2 / 2 / 0.6 / 2, 0.0) for f0 in (3.3, 20.0))
+
+    f = np.fft.rfftfreq(8192, DT)
+    prior = (f, knowledge_noise_floor(f, rate_hz=RATE, noise_rad=NOISE) + line_psd(f))
+    out, fu = fuse_with_knowledge(x, dt=DT, highpass_hz=hp, cutoff_hz=cut, noise_rad=NOISE, rate_hz=RATE,
+                                  prior=prior)
+    assert 3.3 in [round(v, 1) for v in fu.lines_kept_hz]
+    assert max(fu.lines_kept_hz) <= LINES_UP_TO * 0.7 * cut      # the 20 Hz line is not among them
+    assert fu.lines_fused == 0
+    np.testing.assert_array_equal(out, x)
