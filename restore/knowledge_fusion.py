@@ -56,9 +56,11 @@ jointly (:func:`restore.conditioned_excess.strong_lines_above`), the test and
 the fusion read the band of the estimate without them, and above the band the
 knowledge's error PSD is the smaller of the prior and what the estimate holds
 there without its lines (:func:`continuum_prior`): the continuum, which is
-what leaks into the band. Measured (unseen low_frequencies scenes under a 2 Hz
-knowledge, restored at the commit that made it): seed 777 roll / pitch 0.037 /
-0.093 → 0.032 / 0.054 px, seed 1234 0.039 / 0.073 → 0.038 / 0.048 px.
+what leaks into the band; lines are fitted up to :data:`LINES_UP_TO` × the
+band's top. Measured (unseen low_frequencies scenes under a 2 Hz knowledge,
+outside the unobservable part, fe4ecb3 → 1209b24): seed 777 roll / pitch
+0.036 / 0.092 → 0.033 / 0.053 px, seed 1234 0.039 / 0.072 → 0.039 / 0.059,
+seed 2027 0.064 / 0.065 → 0.036 / 0.028.
 """
 from __future__ import annotations
 
